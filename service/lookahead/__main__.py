@@ -1,0 +1,5 @@
+"""`python -m lookahead` is the `lookahead` console script."""
+
+from lookahead.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,73 @@
+"""The `lookahead` command line: one console script, one subcommand per job.
+
+Each subcommand lives in its own module exposing `add_parser(subparsers)` (cheap: no heavy
+imports at module level) and `run(args) -> int`. A subcommand whose module is not part of
+this build says so and exits 3 instead of pretending.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from lookahead import __version__
+
+#: subcommand -> (module, one-line help)
+SUBCOMMANDS: dict[str, tuple[str, str]] = {
+    "config": ("lookahead.config_cli", "check or show the machine configuration"),
+    "plan": ("lookahead.plan_cli", "plan a whole job offline and report/plot it"),
+    "serve": ("lookahead.serve_cli", "run the planner service on the Zenoh bus"),
+    "publish": ("lookahead_clients.publisher", "publish a job's segments on the bus"),
+    "winder": ("lookahead_clients.winder", "run the simulated two-drive filament winder"),
+    "record": ("lookahead_clients.recorder", "record everything under NS/** to a file"),
+    "replay": ("lookahead_clients.replay", "replay a recording into a fresh service"),
+    "demo": ("lookahead_clients.demo", "service + winder + publisher together (tube-1450)"),
+}
+
+EXIT_NOT_BUILT = 3
+
+
+def _not_built(name: str, module: str, reason: str):
+    def run(_args: argparse.Namespace) -> int:
+        print(f"lookahead {name}: not available in this build ({module}: {reason}).",
+              file=sys.stderr)
+        return EXIT_NOT_BUILT
+
+    return run
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="lookahead",
+        description="Jerk-limited look-ahead feedrate planner and interpolator on Zenoh.",
+    )
+    parser.add_argument("--version", action="version", version=f"lookahead {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, (module_name, help_text) in SUBCOMMANDS.items():
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as exc:
+            if exc.name is None or not module_name.startswith(exc.name):
+                raise  # a real missing dependency, not an unbuilt subcommand
+            stub = sub.add_parser(name, help=f"{help_text} [not built]")
+            stub.add_argument("rest", nargs=argparse.REMAINDER)
+            stub.set_defaults(func=_not_built(name, module_name, "module missing"))
+            continue
+        p = module.add_parser(sub, name, help_text)
+        p.set_defaults(func=module.run)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help(sys.stderr)
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130

@@ -1,0 +1,100 @@
+"""The path model every planner works on.
+
+A `Path` is a curve x(u) in machine-axis space (N axes, each in its own unit), with a
+native parameter u in [u_min, u_max] and an arc length s in [0, length] measured in the
+path metric: ds = || path_scale * dx ||_2 (PROTOCOL.md "Path speed"; for the winder
+X in mm and C in deg scaled by pi/180*R, so s is fibre length in mm).
+
+Planners work in s. `eval_s` returns derivatives with respect to s, obtained from the
+u-derivatives by the chain rule through u(s) (the paper's section 2.1 warning).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+
+
+class Path(ABC):
+    """A curve in axis space. Subclasses: fitted point streams, B-spline/NURBS pieces,
+    and the concatenation of pieces (`CompositePath`)."""
+
+    #: number of axes
+    naxes: int
+    #: per-axis scale of the path metric, shape (naxes,)
+    path_scale: np.ndarray
+
+    @property
+    @abstractmethod
+    def length(self) -> float:
+        """Total arc length in the path metric (path units)."""
+
+    @property
+    @abstractmethod
+    def u_range(self) -> tuple[float, float]:
+        """The native parameter interval [u_min, u_max]."""
+
+    @abstractmethod
+    def eval_u(self, u: np.ndarray, order: int = 3) -> np.ndarray:
+        """Position and derivatives with respect to u.
+
+        Returns shape (order + 1, len(u), naxes): [x, dx/du, d2x/du2, d3x/du3][:order+1].
+        """
+
+    @abstractmethod
+    def s_of_u(self, u: np.ndarray) -> np.ndarray:
+        """Arc length at parameter u (accurate to 1e-9 relative)."""
+
+    @abstractmethod
+    def u_of_s(self, s: np.ndarray) -> np.ndarray:
+        """Parameter at arc length s (inverse of s_of_u, accurate to 1e-9 relative)."""
+
+    def eval_s(self, s: np.ndarray, order: int = 3) -> np.ndarray:
+        """Position and derivatives with respect to arc length s.
+
+        Returns shape (order + 1, len(s), naxes): [x, x_s, x_ss, x_sss][:order+1].
+        Chain rule with sigma(u) = ||path_scale * x_u||: u_s = 1/sigma,
+        u_ss = -sigma_u / sigma^3, u_sss = (3 sigma_u^2 - sigma sigma_uu) / sigma^5.
+        """
+        s = np.atleast_1d(np.asarray(s, dtype=float))
+        u = self.u_of_s(s)
+        d = self.eval_u(u, order=max(order, 1))
+        w = self.path_scale**2
+        xu = d[1]
+        sigma = np.sqrt(np.sum(w * xu * xu, axis=-1))
+        sigma = np.maximum(sigma, np.finfo(float).tiny)
+        out = np.empty((order + 1, s.size, self.naxes))
+        out[0] = d[0]
+        if order >= 1:
+            us = 1.0 / sigma
+            out[1] = xu * us[:, None]
+        if order >= 2:
+            xuu = d[2]
+            sigma_u = np.sum(w * xu * xuu, axis=-1) / sigma
+            uss = -sigma_u / sigma**3
+            out[2] = xuu * (us**2)[:, None] + xu * uss[:, None]
+        if order >= 3:
+            xuuu = d[3]
+            sigma_uu = (np.sum(w * xuu * xuu, axis=-1) + np.sum(w * xu * xuuu, axis=-1)
+                        - sigma_u**2) / sigma
+            usss = (3.0 * sigma_u**2 - sigma * sigma_uu) / sigma**5
+            out[3] = (xuuu * (us**3)[:, None] + 3.0 * xuu * (us * uss)[:, None]
+                      + xu * usss[:, None])
+        return out
+
+    @abstractmethod
+    def breakpoints_s(self) -> np.ndarray:
+        """Arc lengths of the parameter knots (where some derivative may jump), sorted,
+        including 0 and length. Planners may use them to choose planning segments."""
+
+    def continuity(self) -> int:
+        """Smoothness order guaranteed at interior knots: 2 for C2, 1 for C1 (pchip).
+
+        At a C1 knot x_ss jumps; a planner must cap the feed there at
+        sqrt(jmax * dt / |jump of x_ss|) per axis (DESIGN.md, pitfalls)."""
+        return 2
+
+    def corners_s(self) -> np.ndarray:
+        """Arc lengths of tangent discontinuities, where the machine must come to rest."""
+        return np.empty(0)

@@ -1,0 +1,21 @@
+"""Feed planning along a path: one interface, three methods (heuristic, lp, nlp)."""
+
+from lookahead.planning.base import (
+    FeedCap,
+    FeedProfile,
+    PathState,
+    PlanRequest,
+    PlanResult,
+    Planner,
+    PlanningError,
+)
+
+__all__ = [
+    "FeedCap",
+    "FeedProfile",
+    "PathState",
+    "PlanRequest",
+    "PlanResult",
+    "Planner",
+    "PlanningError",
+]

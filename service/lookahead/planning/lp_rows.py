@@ -1,0 +1,188 @@
+"""Rows of the feed LP (Fan et al.) on a grid in arc length s.
+
+Variables are q_i = (ds/dt)^2 at nodes s_0 < s_1 < ... < s_N (path units^2 / s^2).
+With derivatives of q taken in s (q' = dq/ds, q'' = d2q/ds2) and x', x'', x''' the
+path derivatives with respect to s (DESIGN.md "Mathematics"), for every axis k:
+
+    velocity      x'_k sqrt(q)                                  (a bound on q_i)
+    acceleration  x''_k q + x'_k q' / 2                          (linear in q)
+    jerk          sqrt(q) (x'''_k q + 3/2 x''_k q' + 1/2 x'_k q'') = sqrt(q) L_k(q)
+
+q' and q'' at node i are three-point finite differences over (i-1, i, i+1), valid on a
+non-uniform grid. The jerk bound |sqrt(q) L| <= J is linearized at q* by the tangent of
+the convex J / sqrt(q):  +-sqrt(q*) L(q) + J q / (2 q*) <= 3/2 J, which is conservative.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from lookahead.geometry.base import Path
+
+
+@dataclass(frozen=True)
+class GridGeometry:
+    """Path derivatives w.r.t. s at the grid nodes: d1, d2, d3 have shape (N+1, naxes)."""
+
+    s: np.ndarray
+    d1: np.ndarray
+    d2: np.ndarray
+    d3: np.ndarray
+
+    @classmethod
+    def sample(cls, path: Path, s: np.ndarray) -> GridGeometry:
+        d = path.eval_s(s, order=3)
+        return cls(np.asarray(s, dtype=float), d[1], d[2], d[3])
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.s.size)
+
+
+@dataclass(frozen=True)
+class Rows:
+    """Linear rows lower <= A q <= upper in the unscaled variables q."""
+
+    A: sp.csr_matrix
+    lower: np.ndarray
+    upper: np.ndarray
+
+    @staticmethod
+    def stack(parts: list[Rows], n: int) -> Rows:
+        parts = [p for p in parts if p.A.shape[0] > 0]
+        if not parts:
+            return Rows(sp.csr_matrix((0, n)), np.empty(0), np.empty(0))
+        return Rows(
+            sp.vstack([p.A for p in parts]).tocsr(),
+            np.concatenate([p.lower for p in parts]),
+            np.concatenate([p.upper for p in parts]),
+        )
+
+
+def fd_weights(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Three-point weights on (i-1, i, i+1) for q' and q'' at the interior nodes.
+
+    Returns (w1, w2), each of shape (N-1, 3). Exact for quadratics on any spacing.
+    """
+    h1 = np.diff(s)[:-1]
+    h2 = np.diff(s)[1:]
+    hs = h1 + h2
+    w1 = np.stack([-h2 / (h1 * hs), (h2 - h1) / (h1 * h2), h1 / (h2 * hs)], axis=1)
+    w2 = np.stack([2.0 / (h1 * hs), -2.0 / (h1 * h2), 2.0 / (h2 * hs)], axis=1)
+    return w1, w2
+
+
+def backward_slope_weights(s: np.ndarray) -> np.ndarray:
+    """Three-point weights on (N-2, N-1, N) for q' at the last node (exact for quadratics)."""
+    h1, h2 = s[-2] - s[-3], s[-1] - s[-2]
+    hs = h1 + h2
+    return np.array([h2 / (h1 * hs), -hs / (h1 * h2), (h1 + hs) / (h2 * hs)])
+
+
+def forward_slope_weights(s: np.ndarray) -> np.ndarray:
+    """Three-point weights on (0, 1, 2) for q' at the first node (exact for quadratics)."""
+    h1, h2 = s[1] - s[0], s[2] - s[1]
+    hs = h1 + h2
+    return np.array([-(h1 + hs) / (h1 * hs), hs / (h1 * h2), -h1 / (h2 * hs)])
+
+
+def velocity_caps(geo: GridGeometry, vmax: np.ndarray) -> np.ndarray:
+    """Upper bound on q_i from the axis velocity limits: min_k (vmax_k / |x'_k|)^2."""
+    with np.errstate(divide="ignore"):
+        per_axis = (vmax[None, :] / np.abs(geo.d1)) ** 2
+    return np.min(per_axis, axis=1)
+
+
+def _tridiagonal(coef: np.ndarray, rows_of: np.ndarray, n: int) -> sp.csr_matrix:
+    """Sparse matrix whose row r has coef[r, 0..2] on columns rows_of[r] - 1 .. + 1."""
+    m = coef.shape[0]
+    rr = np.repeat(np.arange(m), 3)
+    cc = (rows_of[:, None] + np.array([-1, 0, 1])[None, :]).ravel()
+    return sp.csr_matrix((coef.ravel(), (rr, cc)), shape=(m, n))
+
+
+def acceleration_rows(geo: GridGeometry, amax: np.ndarray, scale: np.ndarray) -> Rows:
+    """|x''_k q_i + x'_k q'_i / 2| <= scale_i amax_k at the interior nodes, every axis."""
+    n = geo.n_nodes
+    w1, _ = fd_weights(geo.s)
+    nodes = np.arange(1, n - 1)
+    parts = []
+    for k in range(geo.d1.shape[1]):
+        coef = 0.5 * geo.d1[nodes, k, None] * w1
+        coef[:, 1] += geo.d2[nodes, k]
+        bound = amax[k] * scale[nodes]
+        parts.append(Rows(_tridiagonal(coef, nodes, n), -bound, bound))
+    return Rows.stack(parts, n)
+
+
+def end_acceleration_rows(geo: GridGeometry, amax: np.ndarray, scale: float) -> Rows:
+    """Axis acceleration at the last node (used when the plan ends moving), backward slope."""
+    n = geo.n_nodes
+    w = backward_slope_weights(geo.s)
+    A = np.zeros((geo.d1.shape[1], n))
+    A[:, -3:] = 0.5 * geo.d1[-1, :, None] * w[None, :]
+    A[:, -1] += geo.d2[-1]
+    bound = amax * scale
+    return Rows(sp.csr_matrix(A), -bound, bound)
+
+
+def start_slope_row(geo: GridGeometry, a0: float) -> Rows:
+    """q'(s_0) / 2 = a0: the plan starts with path acceleration a0 (forward slope)."""
+    n = geo.n_nodes
+    A = np.zeros((1, n))
+    A[0, :3] = 0.5 * forward_slope_weights(geo.s)
+    return Rows(sp.csr_matrix(A), np.array([a0]), np.array([a0]))
+
+
+def jerk_operator(geo: GridGeometry, axis: int) -> tuple[np.ndarray, np.ndarray]:
+    """Coefficients of L_k(q) = x''' q + 3/2 x'' q' + 1/2 x' q'' at the interior nodes.
+
+    Returns (coef (N-1, 3) on (i-1, i, i+1), interior node indices).
+    """
+    w1, w2 = fd_weights(geo.s)
+    nodes = np.arange(1, geo.n_nodes - 1)
+    coef = 1.5 * geo.d2[nodes, axis, None] * w1 + 0.5 * geo.d1[nodes, axis, None] * w2
+    coef[:, 1] += geo.d3[nodes, axis]
+    return coef, nodes
+
+
+def jerk_rows(
+    geo: GridGeometry, jmax: np.ndarray, scale: np.ndarray, q_star: np.ndarray, q_floor: float
+) -> Rows:
+    """Tangent rows +-sqrt(q*_i) L_k(q) + J q_i / (2 q*_i) <= 3/2 J at the interior nodes.
+
+    J = scale_i jmax_k; q* is floored at q_floor (a tangent at 0 does not exist).
+    """
+    n = geo.n_nodes
+    qs = np.maximum(q_star, q_floor)
+    parts = []
+    for k in range(geo.d1.shape[1]):
+        coef, nodes = jerk_operator(geo, k)
+        J = jmax[k] * scale[nodes]
+        root = np.sqrt(qs[nodes])[:, None]
+        for sign in (1.0, -1.0):
+            c = sign * root * coef
+            c[:, 1] += J / (2.0 * qs[nodes])
+            parts.append(Rows(_tridiagonal(c, nodes, n), np.full(nodes.size, -np.inf), 1.5 * J))
+    return Rows.stack(parts, n)
+
+
+def nodal_jerk(geo: GridGeometry, q: np.ndarray) -> np.ndarray:
+    """The (nonlinear) axis jerk sqrt(q) L_k(q) at the interior nodes, shape (N-1, naxes)."""
+    out = []
+    for k in range(geo.d1.shape[1]):
+        coef, nodes = jerk_operator(geo, k)
+        L = coef[:, 0] * q[nodes - 1] + coef[:, 1] * q[nodes] + coef[:, 2] * q[nodes + 1]
+        out.append(np.sqrt(np.maximum(q[nodes], 0.0)) * L)
+    return np.stack(out, axis=1)
+
+
+def nodal_acceleration(geo: GridGeometry, q: np.ndarray) -> np.ndarray:
+    """Axis acceleration x'' q + x' q'/2 at the interior nodes, shape (N-1, naxes)."""
+    w1, _ = fd_weights(geo.s)
+    nodes = np.arange(1, geo.n_nodes - 1)
+    dq = w1[:, 0] * q[nodes - 1] + w1[:, 1] * q[nodes] + w1[:, 2] * q[nodes + 1]
+    return geo.d2[nodes] * q[nodes, None] + 0.5 * geo.d1[nodes] * dq[:, None]
