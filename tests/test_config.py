@@ -103,7 +103,7 @@ def test_environment_overrides() -> None:
     assert cfg.zenoh.mode == "client"
     assert cfg.ns == "lookahead/winder-2"
     assert cfg.service.batch == 20
-    with pytest.raises(ConfigError, match="service.batch: expected an integer"):
+    with pytest.raises(ConfigError, match=r"service\.batch: expected an integer"):
         build_config({}, environ={"LOOKAHEAD_SERVICE_BATCH": "many"})
 
 

@@ -55,7 +55,8 @@ def _unpack(payload: bytes | bytearray | memoryview, max_bytes: int) -> dict[str
                               max_bin_len=max_bytes, max_str_len=max_bytes,
                               max_array_len=max_bytes, max_map_len=max_bytes)
     except Exception as exc:  # msgpack raises several unrelated exception types
-        raise ProtocolError("payload", f"not valid MessagePack ({exc.__class__.__name__})") from None
+        reason = f"not valid MessagePack ({exc.__class__.__name__})"
+        raise ProtocolError("payload", reason) from None
     if not isinstance(obj, dict):
         raise ProtocolError("payload", f"expected a map, got {type(obj).__name__}")
     if not all(isinstance(k, str) for k in obj):
@@ -295,6 +296,9 @@ class SetpointBatch:
     """A batch of n samples (NS/setpoints); sample k0 + i is due at (k0 + i) * dt after start.
 
     pos, vel, acc: float64 (n, naxes) in axis units (mm, deg) and per second, per second^2.
+    applied: our extension: (job, seq) of the segments the service took in just before it
+    produced this batch (so a recorder knows the sample index k0 at which each segment was
+    received, and a replay can feed them at the same indices).
     """
 
     job: str
@@ -306,6 +310,7 @@ class SetpointBatch:
     vel: np.ndarray
     acc: np.ndarray
     final: bool
+    applied: tuple[tuple[str, int], ...] = ()
 
     @property
     def n(self) -> int:
@@ -318,7 +323,8 @@ class SetpointBatch:
         return _pack({"v": VERSION, "job": self.job, "seq": self.seq, "k0": self.k0,
                       "dt": self.dt, "axes": list(self.axes), "n": self.n,
                       "pos": blob(self.pos), "vel": blob(self.vel), "acc": blob(self.acc),
-                      "final": self.final})
+                      "final": self.final,
+                      "applied": [[job, seq] for job, seq in self.applied]})
 
     @staticmethod
     def decode(payload: bytes) -> SetpointBatch:
@@ -340,7 +346,19 @@ class SetpointBatch:
                 raise ProtocolError(name, f"expected {n * len(axes) * 8} bytes "
                                     f"(n={n} x {len(axes)} axes x 8), got {len(raw)}")
             arrays.append(np.frombuffer(raw, dtype="<f8").reshape(n, len(axes)))
-        return SetpointBatch(job, seq, k0, dt, axes, *arrays, final=final)
+        applied = _applied(msg.get("applied", []))
+        return SetpointBatch(job, seq, k0, dt, axes, *arrays, final=final, applied=applied)
+
+
+def _applied(value: Any) -> tuple[tuple[str, int], ...]:
+    if not isinstance(value, list | tuple):
+        raise ProtocolError("applied", "expected an array of [job, seq] pairs")
+    out = []
+    for i, item in enumerate(value):
+        if not isinstance(item, list | tuple) or len(item) != 2:
+            raise ProtocolError(f"applied[{i}]", "expected a [job, seq] pair")
+        out.append((_job(item[0], f"applied[{i}][0]"), _int(item[1], f"applied[{i}][1]", lo=0)))
+    return tuple(out)
 
 
 # --- status, events, commands -------------------------------------------------------------

@@ -1,0 +1,73 @@
+"""Zenoh sessions for the service and the clients, built from the `[zenoh]` config section.
+
+Only this module and the clients import zenoh. Defaults: the service is a peer listening on
+tcp/127.0.0.1:7447 with multicast scouting off; a client of the default configuration
+connects to the service's listen endpoints instead of listening itself.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+from collections.abc import Sequence
+from dataclasses import replace
+
+from lookahead.config import ZenohSection
+
+#: zenoh's lease: how soon a hung peer is declared gone (DESIGN.md, "Zenoh")
+_LEASE_MS = 1000
+
+
+def zenoh_config(section: ZenohSection):
+    """A zenoh.Config for `section` (the JSON5 file first, then our keys on top)."""
+    import zenoh
+
+    conf = zenoh.Config.from_file(section.config_file) if section.config_file else zenoh.Config()
+    conf.insert_json5("mode", json.dumps(section.mode))
+    conf.insert_json5("scouting/multicast/enabled", json.dumps(section.multicast_scouting))
+    conf.insert_json5("listen/endpoints", json.dumps(list(section.listen)))
+    conf.insert_json5("connect/endpoints", json.dumps(list(section.connect)))
+    conf.insert_json5("transport/link/tx/lease", str(_LEASE_MS))
+    return conf
+
+
+def open_session(section: ZenohSection):
+    """Open a zenoh session for the service (as configured)."""
+    import zenoh
+
+    return zenoh.open(zenoh_config(section))
+
+
+def client_section(section: ZenohSection) -> ZenohSection:
+    """The session a client opens against a service configured with `section`.
+
+    A peer service that only listens is reached by connecting to its listen endpoints; a
+    configuration that names connect endpoints (a router) is used as it is."""
+    if section.connect or section.mode == "client":
+        return replace(section, listen=())
+    return replace(section, listen=(), connect=section.listen)
+
+
+def open_client_session(section: ZenohSection):
+    """Open a zenoh session for a client (publisher, winder, recorder, monitor)."""
+    import zenoh
+
+    return zenoh.open(zenoh_config(client_section(section)))
+
+
+def free_tcp_endpoint(host: str = "127.0.0.1") -> str:
+    """A tcp endpoint on a currently free port of `host` (for tests and the demo)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind((host, 0))
+        return f"tcp/{host}:{sock.getsockname()[1]}"
+
+
+def with_endpoints(section: ZenohSection, listen: Sequence[str] | None = None,
+                   connect: Sequence[str] | None = None) -> ZenohSection:
+    """`section` with listen/connect endpoints replaced where given."""
+    out = section
+    if listen is not None:
+        out = replace(out, listen=tuple(listen))
+    if connect is not None:
+        out = replace(out, connect=tuple(connect))
+    return out
