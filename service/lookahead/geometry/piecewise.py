@@ -1,0 +1,193 @@
+"""A `Path` over scipy piecewise polynomials: polynomial (x = A(u)) or rational
+(x = A(u) / w(u), the homogeneous form of a NURBS).
+
+Derivatives of a rational curve come from the quotient rule applied to the exact
+derivatives of A and w:
+  x' = (A' - w' x) / w,  x'' = (A'' - 2 w' x' - w'' x) / w,
+  x''' = (A''' - 3 w' x'' - 3 w'' x' - w''' x) / w.
+Arc length and u(s) come from `ArcLengthTable`. One-sided values at the breakpoints give
+the tangent corners (where the machine must stop) and the jumps of d2x/ds2 (where a
+planner caps the feed, DESIGN.md "Pitfalls").
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.interpolate import BSpline, PPoly
+
+from lookahead.geometry.arclength import ArcLengthTable
+from lookahead.geometry.base import Path
+
+#: default angle (rad) between one-sided unit tangents above which a knot is a corner
+CORNER_TOL_RAD = 1e-6
+_TINY = np.finfo(float).tiny
+
+
+def ppoly_from_bspline(spline: BSpline) -> PPoly:
+    """The PPoly of a (vector-valued) scipy BSpline over its nonzero knot intervals.
+
+    `PPoly.from_spline` handles scalar coefficients only; here every coefficient row
+    comes from `BSpline.__call__(x, nu=m)` at the left end of each interval, so a piece
+    depends only on its own knots and control points (needed for streaming determinism).
+    """
+    t, k = spline.t, spline.k
+    x = np.unique(t[k : len(t) - k])
+    left = x[:-1]
+    rows = [spline(left, nu=m) / math.factorial(m) for m in range(k, -1, -1)]
+    return PPoly(np.stack(rows), x)
+
+
+def _horner_at(c: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Evaluate polynomial coefficient columns c (k+1, n, ...) at local offsets h (n,)."""
+    h = h.reshape((-1,) + (1,) * (c.ndim - 2))
+    out = c[0]
+    for row in c[1:]:
+        out = out * h + row
+    return out
+
+
+def _quotient(a: list[np.ndarray], w: list[np.ndarray]) -> list[np.ndarray]:
+    """x and its u-derivatives from those of the homogeneous numerator a and weight w."""
+    inv = 1.0 / w[0]
+    x = [a[0] * inv]
+    if len(a) > 1:
+        x.append((a[1] - w[1] * x[0]) * inv)
+    if len(a) > 2:
+        x.append((a[2] - 2.0 * w[1] * x[1] - w[2] * x[0]) * inv)
+    if len(a) > 3:
+        x.append((a[3] - 3.0 * w[1] * x[2] - 3.0 * w[2] * x[1] - w[3] * x[0]) * inv)
+    return x
+
+
+class PiecewisePath(Path):
+    """x(u) = A(u) [/ w(u)] with A a PPoly of values (naxes,), w an optional scalar PPoly
+    on the same strictly increasing breakpoints. u is the native parameter; s is the arc
+    length in the metric ||path_scale * dx||."""
+
+    def __init__(
+        self,
+        pp: PPoly,
+        path_scale: np.ndarray,
+        weight: PPoly | None = None,
+        continuity: int | None = None,
+        corner_tol_rad: float = CORNER_TOL_RAD,
+        lengths: np.ndarray | None = None,
+        split: np.ndarray | None = None,
+    ) -> None:
+        self.pp = pp
+        self.path_scale = np.asarray(path_scale, dtype=float).reshape(-1)
+        self.naxes = int(self.path_scale.size)
+        if pp.c.ndim != 3 or pp.c.shape[2] != self.naxes:
+            raise ValueError(f"path: polynomial values must have {self.naxes} axes")
+        self._knots = np.asarray(pp.x, dtype=float)
+        if np.any(np.diff(self._knots) <= 0):
+            raise ValueError("path: breakpoints must be strictly increasing")
+        self._numer = [pp] + [pp.derivative(j) for j in (1, 2, 3)]
+        self._weight = None if weight is None else [weight] + [
+            weight.derivative(j) for j in (1, 2, 3)
+        ]
+        self._declared_continuity = continuity
+        self.corner_tol_rad = corner_tol_rad
+        self._table = ArcLengthTable(self._speed, self._knots, lengths, split)
+        self._sides: tuple[np.ndarray, np.ndarray] | None = None
+
+    # --- evaluation -------------------------------------------------------------------
+    def _raw(self, u: np.ndarray, order: int) -> list[np.ndarray]:
+        a = [self._numer[j](u) for j in range(order + 1)]
+        if self._weight is None:
+            return a
+        w = [self._weight[j](u).reshape(-1, 1) for j in range(order + 1)]
+        return _quotient(a, w)
+
+    def eval_u(self, u: np.ndarray, order: int = 3) -> np.ndarray:
+        u = np.clip(np.atleast_1d(np.asarray(u, dtype=float)), *self.u_range)
+        return np.stack(self._raw(u, order))
+
+    def _speed(self, u: np.ndarray) -> np.ndarray:
+        """sigma(u) = ||path_scale * dx/du||."""
+        xu = self._raw(u, 1)[1]
+        return np.sqrt(np.sum((self.path_scale * xu) ** 2, axis=-1))
+
+    # --- arc length -------------------------------------------------------------------
+    @property
+    def length(self) -> float:
+        return self._table.length
+
+    @property
+    def u_range(self) -> tuple[float, float]:
+        return float(self._knots[0]), float(self._knots[-1])
+
+    def s_of_u(self, u: np.ndarray) -> np.ndarray:
+        return self._table.s_of_u(u)
+
+    def u_of_s(self, s: np.ndarray) -> np.ndarray:
+        return self._table.u_of_s(s)
+
+    def breakpoints_s(self) -> np.ndarray:
+        return self._table.s_knots.copy()
+
+    @property
+    def interval_lengths(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lengths, quadrature split) per knot interval, for reuse by streaming fits."""
+        return self._table.lengths, self._table.split
+
+    # --- one-sided values at interior breakpoints -------------------------------------
+    def _side_derivs_s(self) -> tuple[np.ndarray, np.ndarray]:
+        """x_s and x_ss from the left and right of every interior breakpoint:
+        arrays of shape (2 sides, 2 orders, m, naxes)."""
+        if self._sides is not None:
+            return self._sides
+        inner = np.arange(1, len(self._knots) - 1)
+        h = self._knots[inner] - self._knots[inner - 1]
+        out = []
+        for cols, hh in ((inner - 1, h), (inner, np.zeros_like(h))):
+            a = [_horner_at(self._numer[j].c[:, cols], hh) for j in range(3)]
+            if self._weight is None:
+                x = a
+            else:
+                w = [_horner_at(self._weight[j].c[:, cols], hh).reshape(-1, 1) for j in range(3)]
+                x = _quotient(a, w)
+            out.append(_s_derivatives(x[1], x[2], self.path_scale))
+        self._sides = (np.stack(out), self._table.s_knots[inner])
+        return self._sides
+
+    def _corner_mask(self) -> np.ndarray:
+        sides, _ = self._side_derivs_s()
+        t_left, t_right = sides[0, 0] * self.path_scale, sides[1, 0] * self.path_scale
+        cos = np.sum(t_left * t_right, axis=-1) / np.maximum(
+            np.linalg.norm(t_left, axis=-1) * np.linalg.norm(t_right, axis=-1), _TINY
+        )
+        return np.arccos(np.clip(cos, -1.0, 1.0)) > self.corner_tol_rad
+
+    def corners_s(self) -> np.ndarray:
+        _, s_inner = self._side_derivs_s()
+        return s_inner[self._corner_mask()]
+
+    def xss_jumps(self) -> tuple[np.ndarray, np.ndarray]:
+        """(s of interior breakpoints (m,), |jump of d2x/ds2| per axis (m, naxes)) away
+        from corners: where a C1 path needs a feed cap sqrt(jmax*dt/|jump|)."""
+        sides, s_inner = self._side_derivs_s()
+        keep = ~self._corner_mask()
+        return s_inner[keep], np.abs(sides[1, 1] - sides[0, 1])[keep]
+
+    def continuity(self) -> int:
+        if self._declared_continuity is not None:
+            return self._declared_continuity
+        _, jumps = self.xss_jumps()
+        if not jumps.size:
+            return 2
+        sides, _ = self._side_derivs_s()
+        scale = np.max(np.abs(sides[:, 1])) + 1.0 / max(self.length, _TINY)
+        return 2 if np.max(jumps) <= 1e-8 * scale else 1
+
+
+def _s_derivatives(xu: np.ndarray, xuu: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """x_s and x_ss from x_u and x_uu (chain rule through sigma = ||scale * x_u||)."""
+    w = scale**2
+    sigma = np.maximum(np.sqrt(np.sum(w * xu * xu, axis=-1)), _TINY)[:, None]
+    sigma_u = np.sum(w * xu * xuu, axis=-1)[:, None] / sigma
+    xs = xu / sigma
+    xss = xuu / sigma**2 - xu * sigma_u / sigma**3
+    return np.stack([xs, xss])
