@@ -42,10 +42,23 @@ def client_section(section: ZenohSection) -> ZenohSection:
     """The session a client opens against a service configured with `section`.
 
     A peer service that only listens is reached by connecting to its listen endpoints; a
-    configuration that names connect endpoints (a router) is used as it is."""
+    configuration that names connect endpoints (a router) is used as it is.
+
+    A peer does not route between other peers, so a peer client also listens on an
+    ephemeral port of the service's host: gossip then connects the clients to each other
+    (the recorder sees the publisher's segments, the demo sees the winder's token)."""
     if section.connect or section.mode == "client":
         return replace(section, listen=())
-    return replace(section, listen=(), connect=section.listen)
+    listen = tuple(ep for ep in map(_ephemeral, section.listen[:1]) if ep)
+    return replace(section, listen=listen, connect=section.listen)
+
+
+def _ephemeral(endpoint: str) -> str | None:
+    """`tcp/HOST:PORT` -> `tcp/HOST:0` (a free port on the same host), None if not tcp."""
+    proto, _, addr = endpoint.partition("/")
+    if proto != "tcp" or ":" not in addr:
+        return None
+    return f"tcp/{addr.split('#')[0].rsplit(':', 1)[0]}:0"
 
 
 def open_client_session(section: ZenohSection):

@@ -24,6 +24,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "record": ("lookahead_clients.recorder", "record everything under NS/** to a file"),
     "replay": ("lookahead_clients.replay", "replay a recording into a fresh service"),
     "demo": ("lookahead_clients.demo", "service + winder + publisher together (tube-1450)"),
+    "status": ("lookahead_clients.status", "ask the service for its status (healthcheck)"),
 }
 
 EXIT_NOT_BUILT = 3

@@ -4,10 +4,10 @@ from lookahead.planning.base import (
     FeedCap,
     FeedProfile,
     PathState,
-    PlanRequest,
-    PlanResult,
     Planner,
     PlanningError,
+    PlanRequest,
+    PlanResult,
 )
 
 __all__ = [

@@ -23,19 +23,44 @@ import scipy.sparse as sp
 from lookahead.geometry.base import Path
 
 
+def s_derivatives(d: np.ndarray, path_scale: np.ndarray) -> tuple[np.ndarray, ...]:
+    """x_s, x_ss, x_sss (each (n, naxes)) and sigma = ds/du (n,) from the u-derivatives
+    d = path.eval_u(u, 3) (the chain rule of `Path.eval_s`, for callers that already
+    hold u and so skip the arc-length inversion)."""
+    w = path_scale**2
+    xu, xuu, xuuu = d[1], d[2], d[3]
+    sigma = np.maximum(np.sqrt(np.sum(w * xu * xu, axis=-1)), np.finfo(float).tiny)
+    sigma_u = np.sum(w * xu * xuu, axis=-1) / sigma
+    sigma_uu = (np.sum(w * xuu * xuu, axis=-1) + np.sum(w * xu * xuuu, axis=-1)
+                - sigma_u**2) / sigma
+    us = 1.0 / sigma
+    uss = -sigma_u / sigma**3
+    usss = (3.0 * sigma_u**2 - sigma * sigma_uu) / sigma**5
+    d1 = xu * us[:, None]
+    d2 = xuu * (us**2)[:, None] + xu * uss[:, None]
+    d3 = xuuu * (us**3)[:, None] + 3.0 * xuu * (us * uss)[:, None] + xu * usss[:, None]
+    return d1, d2, d3, sigma
+
+
 @dataclass(frozen=True)
 class GridGeometry:
-    """Path derivatives w.r.t. s at the grid nodes: d1, d2, d3 have shape (N+1, naxes)."""
+    """Path derivatives w.r.t. s at the grid nodes: d1, d2, d3 have shape (N+1, naxes);
+    u is the native parameter and sigma = ds/du at the nodes (for a cheap u(s) between
+    them, `sampled_check.analytic_ratios`)."""
 
     s: np.ndarray
     d1: np.ndarray
     d2: np.ndarray
     d3: np.ndarray
+    u: np.ndarray | None = None
+    sigma: np.ndarray | None = None
 
     @classmethod
     def sample(cls, path: Path, s: np.ndarray) -> GridGeometry:
-        d = path.eval_s(s, order=3)
-        return cls(np.asarray(s, dtype=float), d[1], d[2], d[3])
+        s = np.asarray(s, dtype=float)
+        u = path.u_of_s(s)
+        d1, d2, d3, sigma = s_derivatives(path.eval_u(u, order=3), path.path_scale)
+        return cls(s, d1, d2, d3, u, sigma)
 
     @property
     def n_nodes(self) -> int:
@@ -44,7 +69,7 @@ class GridGeometry:
 
 @dataclass(frozen=True)
 class Rows:
-    """Linear rows lower <= A q <= upper in the unscaled variables q."""
+    """Linear rows lower <= A q <= upper in the unscaled variables q (A is CSR)."""
 
     A: sp.csr_matrix
     lower: np.ndarray
@@ -52,14 +77,27 @@ class Rows:
 
     @staticmethod
     def stack(parts: list[Rows], n: int) -> Rows:
+        """All rows in one CSR matrix, assembled from the parts' arrays (sp.vstack costs
+        ~0.5 ms per call in scipy's checks, which the LP pays every pass)."""
         parts = [p for p in parts if p.A.shape[0] > 0]
         if not parts:
             return Rows(sp.csr_matrix((0, n)), np.empty(0), np.empty(0))
-        return Rows(
-            sp.vstack([p.A for p in parts]).tocsr(),
-            np.concatenate([p.lower for p in parts]),
-            np.concatenate([p.upper for p in parts]),
-        )
+        offsets = np.cumsum([0] + [p.A.nnz for p in parts])
+        indptr = np.concatenate([[0]] + [p.A.indptr[1:] + o for p, o in
+                                         zip(parts, offsets[:-1], strict=True)])
+        A = sp.csr_matrix((np.concatenate([p.A.data for p in parts]),
+                           np.concatenate([p.A.indices for p in parts]), indptr),
+                          shape=(int(indptr.size - 1), n))
+        return Rows(A, np.concatenate([p.lower for p in parts]),
+                    np.concatenate([p.upper for p in parts]))
+
+
+def banded(coef: np.ndarray, first_col: np.ndarray, n: int) -> sp.csr_matrix:
+    """CSR matrix whose row r holds coef[r, :] on columns first_col[r] .. + width - 1."""
+    m, width = coef.shape
+    indices = (first_col[:, None] + np.arange(width)[None, :]).ravel()
+    indptr = np.arange(m + 1) * width
+    return sp.csr_matrix((coef.ravel(), indices, indptr), shape=(m, n))
 
 
 def fd_weights(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -79,7 +117,7 @@ def backward_slope_weights(s: np.ndarray) -> np.ndarray:
     """Three-point weights on (N-2, N-1, N) for q' at the last node (exact for quadratics)."""
     h1, h2 = s[-2] - s[-3], s[-1] - s[-2]
     hs = h1 + h2
-    return np.array([h2 / (h1 * hs), -hs / (h1 * h2), (h1 + hs) / (h2 * hs)])
+    return np.array([h2 / (h1 * hs), -hs / (h1 * h2), (hs + h2) / (h2 * hs)])
 
 
 def forward_slope_weights(s: np.ndarray) -> np.ndarray:
@@ -98,10 +136,7 @@ def velocity_caps(geo: GridGeometry, vmax: np.ndarray) -> np.ndarray:
 
 def _tridiagonal(coef: np.ndarray, rows_of: np.ndarray, n: int) -> sp.csr_matrix:
     """Sparse matrix whose row r has coef[r, 0..2] on columns rows_of[r] - 1 .. + 1."""
-    m = coef.shape[0]
-    rr = np.repeat(np.arange(m), 3)
-    cc = (rows_of[:, None] + np.array([-1, 0, 1])[None, :]).ravel()
-    return sp.csr_matrix((coef.ravel(), (rr, cc)), shape=(m, n))
+    return banded(coef, rows_of - 1, n)
 
 
 def acceleration_rows(geo: GridGeometry, amax: np.ndarray, scale: np.ndarray) -> Rows:
@@ -186,3 +221,39 @@ def nodal_acceleration(geo: GridGeometry, q: np.ndarray) -> np.ndarray:
     nodes = np.arange(1, geo.n_nodes - 1)
     dq = w1[:, 0] * q[nodes - 1] + w1[:, 1] * q[nodes] + w1[:, 2] * q[nodes + 1]
     return geo.d2[nodes] * q[nodes, None] + 0.5 * geo.d1[nodes] * dq[:, None]
+
+
+def jerk_change_rows(
+    geo: GridGeometry, jmax: np.ndarray, q_star: np.ndarray, q_floor: float, kappa: float,
+    skip: np.ndarray | None = None,
+) -> Rows:
+    """|j_i+1 - j_i| <= kappa jmax_k between neighbouring interior nodes, with the jerk
+    surrogate j_i = sqrt(q*_i) L_k(q) (exact at q = q*).
+
+    Not a machine limit but a regularizer: without it the LP's optimal vertices let the
+    nodal jerk alternate between +J and -J node to node (q zig-zags, which the central
+    differences of q' do not see), and any smooth profile through such nodes overshoots.
+    skip: node indices (rest points) whose neighbours get no such row: next to a fixed
+    q = 0 the linearized row can pin the neighbour to 0 as well (a stalled interval).
+    """
+    n = geo.n_nodes
+    root = np.sqrt(np.maximum(q_star, q_floor))
+    parts = []
+    for k in range(geo.d1.shape[1]):
+        coef, nodes = jerk_operator(geo, k)
+        c = root[nodes, None] * coef
+        m = nodes.size - 1
+        # row r: j at node r+2 minus j at node r+1, on columns r .. r+3
+        band = np.zeros((m, 4))
+        band[:, 1:] += c[1:]
+        band[:, :3] -= c[:-1]
+        keep = np.ones(m, dtype=bool)
+        if skip is not None and skip.size:
+            near = np.zeros(n + 2, dtype=bool)
+            for off in (-1, 0, 1):
+                near[np.clip(skip + off, 0, n - 1)] = True
+            keep = ~(near[nodes[:-1]] | near[nodes[1:]])
+        diff = banded(band[keep], nodes[:-1][keep] - 1, n)
+        bound = np.full(int(keep.sum()), kappa * jmax[k])
+        parts.append(Rows(diff, -bound, bound))
+    return Rows.stack(parts, n)

@@ -1,0 +1,172 @@
+"""Benchmark of the streaming service; results to bench/results/service_stream.json.
+
+1. first segment -> first batch latency (bus, fast and real-time mode, heuristic);
+2. per-replan planning time, median and p99, both methods (engine, tube-1450, 100-point
+   chunks);
+3. real-time factor (motion time / wall time) of tube-9570 streamed in 100-point chunks
+   through the bus in --fast mode, both methods;
+4. CPU share of a `lookahead serve` process in real-time mode at dt = 1 ms (tube-1450).
+
+Run: /tmp/venv/bin/python bench/service_stream.py [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+from lookahead.config import config_to_toml, default_config  # noqa: E402
+from lookahead.geometry.winding import preset_points  # noqa: E402
+from lookahead.stream.engine import Engine  # noqa: E402
+from lookahead.stream.planners import make_planner  # noqa: E402
+from service_harness import Harness, point_segments, service_config  # noqa: E402
+
+
+class TimedPlanner:
+    """Wraps a planner and records the wall time of every plan call (s)."""
+
+    def __init__(self, inner) -> None:
+        self.inner = inner
+        self.name = inner.name
+        self.times: list[float] = []
+
+    def plan(self, request):
+        t = time.perf_counter()
+        try:
+            return self.inner.plan(request)
+        finally:
+            self.times.append(time.perf_counter() - t)
+
+
+def latency(fast: bool) -> float:
+    h = Harness(service_config("heuristic"), fast=fast)
+    try:
+        _, pts, _ = preset_points("tube-1450")
+        segs = point_segments("lat", pts, [100] * (len(pts) // 100 + 1))
+        t0 = time.monotonic()
+        for seg in segs:
+            h.send(seg)
+        h.wait_for(lambda: bool(h.batches), 30, "first batch")
+        return time.monotonic() - t0
+    finally:
+        h.close()
+
+
+def replan_times(method: str) -> dict:
+    cfg = default_config()
+    planner = TimedPlanner(make_planner(method))
+    eng = Engine(cfg, planner)
+    _, pts, _ = preset_points("tube-1450")
+    segs = point_segments("rp", pts, [100] * (len(pts) // 100 + 1))
+    fed = 0
+    while True:
+        if fed < len(segs):
+            eng.submit(segs[fed])
+            fed += 1
+        batch = eng.next_batch()
+        if batch is not None and batch.final:
+            break
+    t = np.array(planner.times) * 1e3
+    return {"plans": int(t.size), "median_ms": float(np.median(t)),
+            "p99_ms": float(np.percentile(t, 99)), "max_ms": float(t.max()),
+            "failed": eng.replan_failures}
+
+
+def realtime_factor(method: str, preset: str) -> dict:
+    h = Harness(service_config(method), fast=True)
+    try:
+        _, pts, _ = preset_points(preset)
+        t0 = time.monotonic()
+        for seg in point_segments("rtf", pts, [100] * (len(pts) // 100 + 1)):
+            h.send(seg)
+        batches = h.wait_final("rtf", timeout=3600)
+        wall = time.monotonic() - t0
+        motion = sum(b.n for b in batches) * h.cfg.machine.dt
+        return {"preset": preset, "motion_s": motion, "wall_s": wall,
+                "realtime_factor": motion / wall}
+    finally:
+        h.close()
+
+
+def _cpu_s(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def cpu_share(method: str) -> dict:
+    cfg = service_config(method)
+    with tempfile.NamedTemporaryFile("w", suffix=".toml", delete=False) as f:
+        f.write(config_to_toml(cfg))
+    proc = subprocess.Popen([sys.executable, "-m", "lookahead", "serve", "--config", f.name,
+                             "--log-level", "WARNING"])
+    try:
+        time.sleep(1.5)
+        h = Harness.__new__(Harness)
+        client_cfg = cfg
+        # a client-only harness: no service thread of its own
+        from lookahead.bus import open_client_session
+        from lookahead.protocol import SetpointBatch, key
+
+        session = open_client_session(client_cfg.zenoh)
+        got: list[SetpointBatch] = []
+        sub = session.declare_subscriber(
+            key(cfg.ns, "setpoints"),
+            lambda s: got.append(SetpointBatch.decode(s.payload.to_bytes())))
+        import zenoh
+
+        pub = session.declare_publisher(key(cfg.ns, "segments"),
+                                        congestion_control=zenoh.CongestionControl.BLOCK)
+        time.sleep(0.6)
+        _, pts, _ = preset_points("tube-1450")
+        c0, t0 = _cpu_s(proc.pid), time.monotonic()
+        for seg in point_segments("cpu", pts, [100] * (len(pts) // 100 + 1)):
+            pub.put(seg.encode())
+        while not any(b.final for b in got) and time.monotonic() - t0 < 120:
+            time.sleep(0.05)
+        c1, t1 = _cpu_s(proc.pid), time.monotonic()
+        sub.undeclare()
+        session.close()
+        del h
+        return {"method": method, "wall_s": t1 - t0, "cpu_s": c1 - c0,
+                "cpu_share": (c1 - c0) / (t1 - t0), "samples": sum(b.n for b in got)}
+    finally:
+        proc.terminate()
+        proc.wait(timeout=40)
+        os.unlink(f.name)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--quick", action="store_true", help="skip the LP on tube-9570")
+    args = ap.parse_args()
+    out: dict = {"machine": {"cpus": os.cpu_count()}}
+    out["latency_first_batch_s"] = {"fast": latency(True), "realtime": latency(False)}
+    print(out["latency_first_batch_s"], flush=True)
+    out["replan"] = {m: replan_times(m) for m in ("heuristic", "lp")}
+    print(out["replan"], flush=True)
+    methods = ("heuristic",) if args.quick else ("heuristic", "lp")
+    out["realtime_factor_tube_9570_fast"] = {m: realtime_factor(m, "tube-9570")
+                                             for m in methods}
+    print(out["realtime_factor_tube_9570_fast"], flush=True)
+    out["cpu_share_realtime"] = {m: cpu_share(m) for m in ("heuristic", "lp")}
+    print(out["cpu_share_realtime"], flush=True)
+    dest = ROOT / "bench" / "results" / "service_stream.json"
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    dest.write_text(json.dumps(out, indent=2) + "\n")
+    print(f"wrote {dest}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

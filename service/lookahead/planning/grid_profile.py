@@ -1,0 +1,125 @@
+"""From feed values on an s-grid to a C2 feed profile s(t).
+
+Each grid interval [s_i, s_i+1] becomes one quintic in t with the nodal state
+(s, v = sqrt(q), a = q'/2) at both ends (Hermite data), so s(t) is C2 by construction
+and starts exactly in the requested state. The interval's duration is free: the
+duration is chosen so that the quintic degenerates to a quartic (jerk linear in t, no
+spurious position-correcting jerk, which scales like 60 dh / T^3); where that is not
+possible, the duration near the trapezoid time of least peak path jerk (hand-written:
+a vectorized scan, scipy has no batched scalar minimizer).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.interpolate import PPoly
+
+from lookahead.planning.base import FeedProfile, PlanningError
+from lookahead.planning.lp_rows import backward_slope_weights, fd_weights
+
+_COARSE = np.linspace(0.6, 1.8, 49)
+_FINE = np.linspace(-1.0, 1.0, 21)
+
+
+def node_accelerations(
+    s: np.ndarray, q: np.ndarray, a_start: float, a_end: float | None
+) -> np.ndarray:
+    """Path acceleration q'/2 at the nodes; the end values are given (None: backward slope)."""
+    a = np.empty_like(q)
+    w1, _ = fd_weights(s)
+    a[1:-1] = 0.5 * (w1[:, 0] * q[:-2] + w1[:, 1] * q[1:-1] + w1[:, 2] * q[2:])
+    a[0] = a_start
+    a[-1] = 0.5 * float(backward_slope_weights(s) @ q[-3:]) if a_end is None else a_end
+    return a
+
+
+def quintic_coefficients(
+    T: np.ndarray, h: np.ndarray, v0: np.ndarray, a0: np.ndarray, v1: np.ndarray,
+    a1: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """c3, c4, c5 of s(tau) = v0 tau + a0 tau^2/2 + c3 tau^3 + c4 tau^4 + c5 tau^5 (s(0)=0)
+    reaching (h, v1, a1) at tau = T."""
+    d0 = h - v0 * T - 0.5 * a0 * T**2
+    d1 = v1 - v0 - a0 * T
+    d2 = a1 - a0
+    c3 = (10.0 * d0 - 4.0 * d1 * T + 0.5 * d2 * T**2) / T**3
+    c4 = (-15.0 * d0 + 7.0 * d1 * T - d2 * T**2) / T**4
+    c5 = (6.0 * d0 - 3.0 * d1 * T + 0.5 * d2 * T**2) / T**5
+    return c3, c4, c5
+
+
+def _peak_jerk_and_min_speed(T, h, v0, a0, v1, a1):
+    c3, c4, c5 = quintic_coefficients(T, h, v0, a0, v1, a1)
+    tau = T[..., None] * np.linspace(0.0, 1.0, 9)
+    jerk = 6.0 * c3[..., None] + 24.0 * c4[..., None] * tau + 60.0 * c5[..., None] * tau**2
+    speed = (v0[..., None] + a0[..., None] * tau + 3.0 * c3[..., None] * tau**2
+             + 4.0 * c4[..., None] * tau**3 + 5.0 * c5[..., None] * tau**4)
+    return np.max(np.abs(jerk), axis=-1), np.min(speed, axis=-1)
+
+
+def _best_factor(factors, T_ref, h, v0, a0, v1, a1):
+    """For each interval, the factor (row of `factors`) of least peak jerk, no reversal."""
+    T = T_ref[:, None] * factors
+    args = [x[:, None] for x in (h, v0, a0, v1, a1)]
+    peak, vmin = _peak_jerk_and_min_speed(T, *args)
+    peak = np.where(vmin >= -1e-9 * (1.0 + np.abs(args[1]) + np.abs(args[3])), peak, np.inf)
+    return factors[np.arange(T.shape[0]), np.argmin(peak, axis=1)]
+
+
+def consistent_durations(h: np.ndarray, v0, a0, v1, a1) -> np.ndarray:
+    """The duration T that makes the quintic a quartic (c5 = 0, jerk linear in t).
+
+    c5 = 0 is h = T (v0 + v1) / 2 + T^2 (a0 - a1) / 12, the integral of the cubic Hermite
+    speed; it gives the trapezoid time when a0 = a1 and the exact time of a constant-jerk
+    start from rest. The smaller root; NaN where none is real and positive.
+    """
+    beta = 3.0 * (v0 + v1)
+    disc = beta**2 - 12.0 * (a1 - a0) * h
+    with np.errstate(invalid="ignore", divide="ignore"):
+        T = 12.0 * h / (beta + np.sqrt(disc))
+    return np.where((disc >= 0) & (T > 0) & np.isfinite(T), T, np.nan)
+
+
+def interval_durations(h: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Duration of each interval: the quartic-making time where it exists and keeps the
+    speed >= 0, else the least-peak-jerk choice around the trapezoid time."""
+    vsum = v[:-1] + v[1:]
+    if np.any(vsum <= 0.0):
+        raise PlanningError("the feed vanishes on a whole grid interval (stalls)")
+    v0, v1, a0, a1 = v[:-1], v[1:], a[:-1], a[1:]
+    T = consistent_durations(h, v0, a0, v1, a1)
+    ok = np.isfinite(T)
+    _, vmin = _peak_jerk_and_min_speed(np.where(ok, T, 1.0), h, v0, a0, v1, a1)
+    ok &= vmin >= -1e-9 * (1.0 + v0 + v1)
+    bad = ~ok
+    if np.any(bad):
+        T_ref = 2.0 * h[bad] / vsum[bad]
+        args = (h[bad], v0[bad], a0[bad], v1[bad], a1[bad])
+        n = T_ref.size
+        f = _best_factor(np.broadcast_to(_COARSE, (n, _COARSE.size)), T_ref, *args)
+        fine = f[:, None] + (_COARSE[1] - _COARSE[0]) * _FINE[None, :]
+        T[bad] = T_ref * _best_factor(fine, T_ref, *args)
+    return T
+
+
+def profile_from_grid(
+    s: np.ndarray, q: np.ndarray, a_start: float, a_end: float | None
+) -> FeedProfile:
+    """The C2 quintic profile through the grid states (s_i, sqrt(q_i), q'_i / 2)."""
+    q = np.maximum(q, 0.0)
+    v = np.sqrt(q)
+    a = node_accelerations(s, q, a_start, a_end)
+    h = np.diff(s)
+    T = interval_durations(h, v, a)
+    c3, c4, c5 = quintic_coefficients(T, h, v[:-1], a[:-1], v[1:], a[1:])
+    coeffs = np.stack([c5, c4, c3, 0.5 * a[:-1], v[:-1], s[:-1]])
+    t = np.concatenate([[0.0], np.cumsum(T)])
+    return FeedProfile(PPoly(coeffs, t, extrapolate=False))
+
+
+def grid_time(s: np.ndarray, q: np.ndarray) -> float:
+    """Travel time of q linear in s: sum 2 h / (sqrt(q_i) + sqrt(q_i+1)) (s)."""
+    v = np.sqrt(np.maximum(q, 0.0))
+    vsum = v[:-1] + v[1:]
+    with np.errstate(divide="ignore"):
+        return float(np.sum(np.where(vsum > 0, 2.0 * np.diff(s) / vsum, np.inf)))

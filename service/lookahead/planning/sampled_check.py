@@ -1,0 +1,113 @@
+"""Where a planned profile breaks the axis limits (planner-internal repair aid).
+
+The planners use this to find *where* to tighten: the finite differences of PROTOCOL.md
+"Limits" on positions sampled at several phases of the dt grid (a stitched profile is
+sampled at an arbitrary phase), end state held. The checker
+(`lookahead.checker`) stays the judge; this returns per-time ratios so that a violation
+can be traced back to a place on the path.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import CubicHermiteSpline
+
+from lookahead.geometry.base import Path
+from lookahead.limits import AxisLimits
+from lookahead.planning.base import FeedProfile
+from lookahead.planning.lp_rows import GridGeometry, s_derivatives
+
+
+def sample_times(duration: float, dt: float, hold: int = 3) -> np.ndarray:
+    """t = k dt for k = 0 .. ceil(T/dt) + hold (the end state is held for `hold` samples)."""
+    n = int(np.ceil(duration / dt - 1e-9)) + 1 + hold
+    return np.arange(n) * dt
+
+
+def sample_positions(path: Path, profile: FeedProfile, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """(t, axis positions (n, naxes)) at t = k dt; s(t) clipped to the profile's span."""
+    t = sample_times(profile.duration, dt)
+    s = profile.at(t)[0]
+    return t, path.eval_s(s, order=0)[0]
+
+
+@dataclass(frozen=True)
+class SampledRatios:
+    """The worst |value| / limit over the axes, for velocity, acceleration and jerk, at the
+    times `t_vel`, `t_acc`, `t_jerk` (s from the profile's start)."""
+
+    vel: np.ndarray
+    acc: np.ndarray
+    jerk: np.ndarray
+    t_vel: np.ndarray
+    t_acc: np.ndarray
+    t_jerk: np.ndarray
+
+    @property
+    def worst(self) -> float:
+        return float(max(self.vel.max(initial=0.0), self.acc.max(initial=0.0),
+                         self.jerk.max(initial=0.0)))
+
+    def merged(self, other: SampledRatios) -> SampledRatios:
+        return SampledRatios(*(np.concatenate([a, b]) for a, b in zip(
+            (self.vel, self.acc, self.jerk, self.t_vel, self.t_acc, self.t_jerk),
+            (other.vel, other.acc, other.jerk, other.t_vel, other.t_acc, other.t_jerk),
+            strict=True)))
+
+
+def difference_ratios(pos: np.ndarray, limits: AxisLimits, dt: float) -> SampledRatios:
+    """Finite-difference velocity, acceleration and jerk of `pos` (sampled at k dt) over
+    their limits; each difference is placed at the centre of its sample window."""
+    ratios, times = [], []
+    for order, lim in ((1, limits.vmax), (2, limits.amax), (3, limits.jmax)):
+        d = np.diff(pos, n=order, axis=0) / dt**order
+        ratios.append(np.max(np.abs(d) / lim, axis=1) if len(d) else np.zeros(0))
+        times.append((np.arange(len(d)) + 0.5 * order) * dt)
+    return SampledRatios(*ratios, *times)
+
+
+def profile_ratios(path: Path, profile: FeedProfile, limits: AxisLimits, dt: float,
+                   phases: int = 4) -> SampledRatios:
+    """What the planners verify: the finite differences at spacing dt of positions sampled
+    every dt / phases, i.e. the checker's test at `phases` sampling phases at once (a
+    stitched profile is sampled at an arbitrary phase)."""
+    step = dt / phases
+    t = np.arange(int(np.ceil(profile.duration / step - 1e-9)) + 1 + 3 * phases) * step
+    pos = path.eval_s(profile.at(t)[0], order=0)[0]
+    ratios, times = [], []
+    for order, lim in ((1, limits.vmax), (2, limits.amax), (3, limits.jmax)):
+        d = pos
+        for _ in range(order):
+            d = d[phases:] - d[:-phases]
+        d = d / dt**order
+        ratios.append(np.max(np.abs(d) / lim, axis=1) if len(d) else np.zeros(0))
+        times.append(np.arange(len(d)) * step + 0.5 * order * dt)
+    return SampledRatios(*ratios, *times)
+
+
+def analytic_ratios(path: Path, profile: FeedProfile, limits: AxisLimits,
+                    geo: GridGeometry, step: float) -> SampledRatios:
+    """The continuous axis velocity, acceleration and jerk over their limits at t = k step
+    (s from the profile's start), from the profile's exact polynomial derivatives and the
+    path's s-derivatives (chain rule: x_s v, x_ss v^2 + x_s a, x_sss v^3 + 3 x_ss v a +
+    x_s j).
+
+    The checker's finite differences are averages of these continuous values over one to
+    three samples, so bounding them bounds the checker's. u(s) between the grid nodes is
+    a cubic Hermite interpolant of the nodes' (u, du/ds = 1/sigma): it only locates where
+    the derivatives are evaluated (error ~1e-6 of a node spacing), so it does not need the
+    exact arc-length inversion that dominates `profile_ratios`.
+    """
+    if geo.u is None or geo.sigma is None:
+        raise ValueError("analytic_ratios needs a GridGeometry sampled with u and sigma")
+    t = np.arange(int(np.ceil(profile.duration / step)) + 1) * step
+    s, v, a, j = profile.at(t)
+    u = CubicHermiteSpline(geo.s, geo.u, 1.0 / geo.sigma, extrapolate=True)(s)
+    d1, d2, d3, _ = s_derivatives(path.eval_u(u, order=3), path.path_scale)
+    v, a, j = v[:, None], a[:, None], j[:, None]
+    vel = np.max(np.abs(d1 * v) / limits.vmax, axis=1)
+    acc = np.max(np.abs(d2 * v * v + d1 * a) / limits.amax, axis=1)
+    jerk = np.max(np.abs(d3 * v**3 + 3.0 * d2 * v * a + d1 * j) / limits.jmax, axis=1)
+    return SampledRatios(vel, acc, jerk, t, t, t)

@@ -1,0 +1,387 @@
+"""The planner service on Zenoh (PROTOCOL.md): a thin wrapper around `stream.engine.Engine`.
+
+Threads: a drain thread empties the NS/segments FifoChannel into a queue of payloads; zenoh
+calls the NS/cmd/* and NS/status queryables on its own threads (commands are handed to
+the main loop and answered once applied); the main loop (`run`, the caller's thread) owns
+the engine: it decodes segments, applies commands, publishes batches (real-time: paced by
+the wall clock, `lead_s` ahead of due time; fast: as fast as possible), events and status.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import queue
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import msgpack
+
+from lookahead.bus import open_session
+from lookahead.config import Config
+from lookahead.planning.base import Planner
+from lookahead.protocol import (
+    JOB_ID_RE,
+    MAX_PAYLOAD_BYTES,
+    Command,
+    CommandReply,
+    ProtocolError,
+    Segment,
+    SetpointBatch,
+    key,
+)
+from lookahead.stream.engine import Engine
+from lookahead.stream.pacing import Pacer
+from lookahead.stream.planners import make_planner
+
+log = logging.getLogger("lookahead.service")
+
+#: segments buffered by zenoh before the drain thread takes them
+FIFO_CAPACITY = 4096
+#: the drain thread's sleep when the channel is empty (s)
+DRAIN_IDLE_S = 0.002
+#: longest sleep of the main loop (s)
+MAX_SLEEP_S = 0.01
+#: fast mode: batches published between two looks at commands and status
+FAST_BURST = 50
+#: real-time mode: produce at least this far ahead of publication, plus 1.5 x the longest
+#: batch computation seen (a replan), at most MAX_AHEAD_S (s)
+MIN_AHEAD_S = 0.05
+MAX_AHEAD_S = 1.0
+#: how long a command query waits for the main loop (s)
+COMMAND_TIMEOUT_S = 5.0
+#: shutdown: longest wait for the stop to finish (s)
+SHUTDOWN_TIMEOUT_S = 30.0
+
+
+@dataclass
+class _PendingCommand:
+    command: Command
+    done: threading.Event = field(default_factory=threading.Event)
+    reply: CommandReply | None = None
+
+
+@dataclass
+class ServiceStats:
+    """Counters of one run (for the benchmark and the logs)."""
+
+    segments: int = 0
+    rejected: int = 0
+    batches: int = 0
+    samples: int = 0
+    max_late_s: float = 0.0
+    first_segment_s: float | None = None
+    first_batch_s: float | None = None
+
+
+class PlannerService:
+    """`lookahead serve`: open(), run() until request_shutdown(), close()."""
+
+    def __init__(self, config: Config, fast: bool = False, planner: Planner | None = None
+                 ) -> None:
+        self.config = config
+        self.fast = fast
+        self.ns = config.ns
+        self.engine = Engine(config, planner or make_planner(config.planner.method),
+                             realtime=not fast)
+        self.pacer = Pacer(config.machine.dt, config.service.lead_s)
+        self.stats = ServiceStats()
+        self._incoming: queue.Queue[bytes] = queue.Queue()
+        self._commands: queue.Queue[_PendingCommand] = queue.Queue()
+        self._shutdown = threading.Event()
+        self._drain_stop = threading.Event()
+        self._status_payload = self.engine.status().encode()
+        self._session: Any = None
+        self._decls: list[Any] = []
+        self._drain_thread: threading.Thread | None = None
+        self._pace_thread: threading.Thread | None = None
+        self._out: collections.deque[SetpointBatch] = collections.deque()
+        self._out_cv = threading.Condition()
+        self._out_samples = 0
+        self._max_compute_s = 0.0
+        self._job_end_due: float | None = None
+
+    # --- bus ------------------------------------------------------------------------
+    def open(self) -> None:
+        import zenoh
+
+        self._session = session = open_session(self.config.zenoh)
+        block = zenoh.CongestionControl.BLOCK
+        self._pub_setpoints = session.declare_publisher(key(self.ns, "setpoints"),
+                                                        congestion_control=block)
+        self._pub_events = session.declare_publisher(key(self.ns, "events"),
+                                                     congestion_control=block)
+        self._pub_status = session.declare_publisher(key(self.ns, "status"))
+        self._sub = session.declare_subscriber(key(self.ns, "segments"),
+                                               zenoh.handlers.FifoChannel(FIFO_CAPACITY))
+        self._decls += [self._pub_setpoints, self._pub_events, self._pub_status]
+        self._decls.append(session.declare_queryable(key(self.ns, "status"), self._on_status))
+        self._decls.append(session.declare_queryable(key(self.ns, "cmd", "*"),
+                                                     self._on_command))
+        self._token = session.liveliness().declare_token(key(self.ns, "alive", "planner"))
+        self._drain_thread = threading.Thread(target=self._drain, name="segments-drain",
+                                              daemon=True)
+        self._drain_thread.start()
+        if not self.fast:
+            self._pace_thread = threading.Thread(target=self._pace, name="pacer", daemon=True)
+            self._pace_thread.start()
+        log.info("serving ns=%s planner=%s mode=%s listen=%s connect=%s", self.ns,
+                 self.config.planner.method, "fast" if self.fast else "real-time",
+                 list(self.config.zenoh.listen), list(self.config.zenoh.connect))
+
+    def close(self) -> None:
+        self._drain_stop.set()
+        with self._out_cv:
+            self._out_cv.notify_all()
+        for thread in (self._drain_thread, self._pace_thread):
+            if thread is not None:
+                thread.join(timeout=2.0)
+        if self._session is None:
+            return
+        for decl in [*self._decls, self._sub, self._token]:
+            try:
+                decl.undeclare()
+            except Exception:  # already gone with a closing session
+                log.debug("undeclare failed", exc_info=True)
+        self._session.close()
+        self._session = None
+
+    def _drain(self) -> None:
+        """FifoChannel -> queue (polling: a blocking recv cannot be interrupted cleanly)."""
+        while not self._drain_stop.is_set():
+            sample = self._sub.try_recv()
+            if sample is None:
+                time.sleep(DRAIN_IDLE_S)
+                continue
+            self._incoming.put(sample.payload.to_bytes())
+
+    def _on_status(self, query: Any) -> None:
+        query.reply(query.key_expr, self._status_payload)
+
+    def _on_command(self, query: Any) -> None:
+        verb = str(query.key_expr).rsplit("/", 1)[-1]
+        payload = query.payload.to_bytes() if query.payload is not None else None
+        try:
+            cmd = Command.decode(verb, payload)
+        except ProtocolError as exc:
+            query.reply(query.key_expr, CommandReply(False, str(exc)).encode())
+            return
+        pending = _PendingCommand(cmd)
+        self._commands.put(pending)
+        if not pending.done.wait(COMMAND_TIMEOUT_S):
+            reply = CommandReply(False, f"{verb}: the service did not answer in time")
+        else:
+            reply = pending.reply or CommandReply(False, f"{verb}: no reply")
+        query.reply(query.key_expr, reply.encode())
+
+    # --- main loop ------------------------------------------------------------------
+    def request_shutdown(self) -> None:
+        """Stop the running job along the path (abort), then leave `run` (signal-safe)."""
+        self._shutdown.set()
+
+    def run(self) -> int:
+        """Serve until request_shutdown() and the stop is done; returns an exit code."""
+        next_status = 0.0
+        deadline: float | None = None
+        self._next_poll = 0.0
+        while True:
+            now = time.monotonic()
+            self._take_in(now)
+            self._apply_commands()
+            if self._shutdown.is_set():
+                if deadline is None:
+                    deadline = now + SHUTDOWN_TIMEOUT_S
+                    if self.engine.active_job is not None:
+                        log.info("shutdown: stopping job %s", self.engine.active_job)
+                        self.engine.command(Command("abort"))
+                if self.engine.active_job is None and self._buffered_s() == 0:
+                    break
+                if now > deadline:
+                    log.error("shutdown: the stop did not finish in %s s", SHUTDOWN_TIMEOUT_S)
+                    break
+            self.engine.expire_gaps(now)
+            produced = self._produce_fast() if self.fast else self._produce_paced(now)
+            self._publish_events()
+            if now >= next_status:
+                self._publish_status()
+                next_status = now + 1.0 / self.config.service.status_hz
+            if not produced:
+                self._sleep(now, next_status)
+        self._publish_events()
+        self._publish_status()
+        log.info("stopped: %d segments, %d rejected, %d batches, %d samples, "
+                 "%d replans (%d failed)", self.stats.segments, self.stats.rejected,
+                 self.stats.batches, self.stats.samples, self.engine.replans,
+                 self.engine.replan_failures)
+        return 0
+
+    def _sleep(self, now: float, next_status: float) -> None:
+        wake = min(next_status, now + MAX_SLEEP_S)
+        if not self.fast:
+            wake = min(wake, self._next_poll)
+        timeout = wake - time.monotonic()
+        if timeout <= 0:
+            return
+        try:
+            payload = self._incoming.get(timeout=timeout)
+        except queue.Empty:
+            return
+        self._handle_payload(payload, time.monotonic())
+
+    def _stopping_done(self) -> bool:
+        return self._shutdown.is_set() and self.engine.active_job is None
+
+    def _produce_fast(self) -> bool:
+        produced = 0
+        while produced < FAST_BURST and not self._stopping_done():
+            batch = self._next_batch()
+            if batch is None:
+                break
+            self._publish_batch(batch, time.monotonic())
+            produced += 1
+            self._take_in(time.monotonic())
+        return produced > 0
+
+    def _produce_paced(self, now: float) -> bool:
+        """Real-time: keep the buffer ahead of publication by the expected compute time;
+        the pacer thread publishes each batch lead_s before it is due."""
+        if now < self._next_poll or self._stopping_done():
+            return False
+        ahead = MIN_AHEAD_S + min(MAX_AHEAD_S, 1.5 * self._max_compute_s)
+        if self._buffered_s() >= ahead:
+            self._next_poll = now + self.config.service.batch * self.config.machine.dt
+            return False
+        t = time.monotonic()
+        batch = self._next_batch()
+        self._max_compute_s = max(self._max_compute_s, time.monotonic() - t)
+        if batch is None:
+            self._next_poll = now + self.config.service.batch * self.config.machine.dt
+            return False
+        with self._out_cv:
+            self._out.append(batch)
+            self._out_samples += batch.n
+            self._out_cv.notify_all()
+        return True
+
+    def _buffered_s(self) -> float:
+        return self._out_samples * self.config.machine.dt
+
+    def _pace(self) -> None:
+        """Pacer thread: publish buffered batches at due time - lead_s. A job's clock
+        starts when its first batch is taken (not before the previous job's end)."""
+        while not self._drain_stop.is_set():
+            with self._out_cv:
+                while not self._out and not self._drain_stop.is_set():
+                    self._out_cv.wait(0.1)
+                if not self._out:
+                    return
+                batch = self._out[0]
+            now = time.monotonic()
+            if batch.k0 == 0:
+                self.pacer.start(max(now, self._job_end_due or now))
+            wait = self.pacer.publish_at(batch.k0) - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
+            now = time.monotonic()
+            self.stats.max_late_s = max(self.stats.max_late_s,
+                                        self.pacer.late_s(batch.k0, now) + self.pacer.lead_s)
+            self._publish_batch(batch, now)
+            if batch.final:
+                self._job_end_due = self.pacer.due_s(batch.k0 + batch.n) - self.pacer.lead_s
+            with self._out_cv:
+                self._out.popleft()
+                self._out_samples -= batch.n
+
+    def _next_batch(self) -> SetpointBatch | None:
+        try:
+            return self.engine.next_batch()
+        except Exception as exc:  # an internal failure must not take the service down
+            log.exception("internal error while producing a batch")
+            self.engine.fail(f"internal: {exc.__class__.__name__}: {exc}")
+            return None
+
+    # --- input ------------------------------------------------------------------------
+    def _take_in(self, now: float) -> None:
+        while True:
+            try:
+                payload = self._incoming.get_nowait()
+            except queue.Empty:
+                return
+            self._handle_payload(payload, now)
+
+    def _handle_payload(self, payload: bytes, now: float) -> None:
+        if self.stats.first_segment_s is None:
+            self.stats.first_segment_s = now
+        try:
+            seg = Segment.decode(payload, axes=self.engine.axes)
+        except ProtocolError as exc:
+            job, seq = peek_ids(payload)
+            self.engine.reject(str(exc), job, seq)
+            return
+        self.stats.segments += 1
+        try:
+            self.engine.submit(seg, now)
+        except Exception as exc:  # a bug must not take the service down
+            log.exception("internal error taking in segment %s/%d", seg.job, seg.seq)
+            self.engine.reject(f"internal: {exc.__class__.__name__}: {exc}", seg.job, seg.seq)
+
+    def _apply_commands(self) -> None:
+        while True:
+            try:
+                pending = self._commands.get_nowait()
+            except queue.Empty:
+                return
+            try:
+                pending.reply = self.engine.command(pending.command)
+            except Exception as exc:
+                log.exception("internal error applying %s", pending.command.verb)
+                pending.reply = CommandReply(False, f"internal: {exc}")
+            log.info("command %s%s -> %s", pending.command.verb,
+                     "" if pending.command.value is None else f" {pending.command.value}",
+                     "ok" if pending.reply.ok else pending.reply.error)
+            self._status_payload = self.engine.status().encode()
+            pending.done.set()
+
+    # --- output -----------------------------------------------------------------------
+    def _publish_batch(self, batch: SetpointBatch, now: float) -> None:
+        self._pub_setpoints.put(batch.encode())
+        self.stats.batches += 1
+        self.stats.samples += batch.n
+        if self.stats.first_batch_s is None:
+            self.stats.first_batch_s = now
+        if batch.final:
+            log.info("final batch job=%s seq=%d k=%d", batch.job, batch.seq,
+                     batch.k0 + batch.n - 1)
+
+    def _publish_events(self) -> None:
+        for event in self.engine.drain_events():
+            if event.type == "rejected":
+                self.stats.rejected += 1
+            self._pub_events.put(event.encode())
+            level = logging.WARNING if event.type in ("rejected", "fault", "starved") \
+                else logging.INFO
+            extra = " ".join(f"{k}={v!r}" for k, v in event.extra.items())
+            log.log(level, "event %s job=%s k=%d %s", event.type, event.job, event.k, extra)
+
+    def _publish_status(self) -> None:
+        self._status_payload = self.engine.status().encode()
+        self._pub_status.put(self._status_payload)
+
+
+def peek_ids(payload: bytes) -> tuple[str | None, int | None]:
+    """Best-effort (job, seq) of a payload that failed validation, for its `rejected`."""
+    if len(payload) > MAX_PAYLOAD_BYTES:
+        return None, None
+    try:
+        msg = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+    except Exception:
+        return None, None
+    if not isinstance(msg, dict):
+        return None, None
+    job = msg.get("job")
+    seq = msg.get("seq")
+    job = job if isinstance(job, str) and JOB_ID_RE.match(job) else None
+    seq = seq if isinstance(seq, int) and not isinstance(seq, bool) and seq >= 0 else None
+    return job, seq

@@ -1,0 +1,548 @@
+"""The deterministic core of the planner service: segments in, setpoint batches out.
+
+No zenoh and no wall clock in here: time is the sample index k (sample k is due at k*dt
+after the job's start). The service (`lookahead.service`) feeds decoded segments and
+commands and asks for batches when they are due; a replay does the same from a recording.
+
+API (stable; the replay client depends on it):
+
+- `Engine(config, planner, realtime=False)`; `planner` implements `Planner` and plans to
+  the limits it is given (the engine applies `config.planner.margin` and the override).
+- `submit(segment, now_s=None) -> list[Event]`: take in a decoded segment. Segments are
+  recorded and listed in the next batch's `applied` field (the sample index k0 at which
+  they were taken in). `now_s` (any monotonic clock, seconds) only times seq gaps.
+- `expire_gaps(now_s) -> list[Event]`: fault jobs whose missing seq waited too long.
+- `reject(reason, job=None, seq=None) -> Event`: a `rejected` event for a payload that did
+  not decode (the service's decode errors).
+- `next_batch() -> SetpointBatch | None`: the next batch of the active job; None when idle,
+  while a job waits for enough geometry to start (each such call counts as one batch of
+  waiting, bounded by START_WAIT_S), and in fast mode (realtime=False) while starved or
+  holding at rest. Real-time mode keeps emitting rest samples then.
+- `command(Command) -> CommandReply`, `status() -> Status`.
+- `drain_events() -> list[Event]`: every event since the last call (including those that
+  `submit`/`expire_gaps`/`reject` returned): publish events from here only.
+
+Replay: for each recorded batch, submit the segments named in its `applied` list, then call
+`next_batch()` until it returns a batch; the batches are bit-identical to the recording.
+
+Planning (DESIGN.md "Look-ahead window"): every plan starts in the state of the last
+published sample (s, ds/dt, d2s/dt2 continuous) and ends at rest inside final geometry, at
+min(final length, s + horizon); every plan is checked with the finite-difference checker
+against the published tail before it is committed, and the previous plan (which also ends
+at rest) stays in force if a replan fails.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import OrderedDict
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lookahead.config import Config
+from lookahead.limits import AxisLimits
+from lookahead.planning.base import PathState, Planner, PlanningError, PlanRequest
+from lookahead.protocol import Command, CommandReply, Event, Segment, SetpointBatch, Status
+from lookahead.stream.assembler import (
+    JobFaultError,
+    JobGeometry,
+    SegmentOrder,
+    SegmentRejectedError,
+)
+from lookahead.stream.plans import (
+    S_TOL,
+    CommittedPlan,
+    plan_checked,
+    rest_plan,
+    shortest_stop,
+)
+
+log = logging.getLogger("lookahead.engine")
+
+#: replan at least this often while the window end can move (s of motion)
+REPLAN_EVERY_S = 0.1
+#: and no more often than this on new geometry alone
+REPLAN_MIN_S = 0.02
+#: a job starts when `last` is in, its final geometry covers the horizon, or after this
+START_WAIT_S = 0.5
+#: during an override change that needs a slowdown first, retry the new limits this often
+TRANSITION_RETRY_S = 0.03
+#: job ids remembered as finished (later segments of them are rejected)
+MAX_DONE = 4096
+
+
+@dataclass
+class _Job:
+    """One job: its assembly and, once started, its run state (k = next sample)."""
+
+    id: str
+    order: SegmentOrder
+    geo: JobGeometry
+    wait: int = 0
+    started: bool = False
+    k: int = 0
+    batch_seq: int = 0
+    plan: CommittedPlan | None = None
+    tail: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
+    planned_final: float = 0.0
+    stop: str | None = None  # why the current plan is a stop: hold, abort, fault, override
+    stop_request: str | None = None
+    hold: bool = False
+    fault: str | None = None
+    starved: bool = False
+    force_replan: bool = False
+    override_pending: bool = False
+    last_try: int = 0
+    last_fail: int = -(10**9)  # sample index of the last failed replan (retry backoff)
+
+
+class Engine:
+    """Segments -> look-ahead plans -> setpoint batches; see the module docstring."""
+
+    def __init__(self, config: Config, planner: Planner, realtime: bool = False,
+                 stop_planner: Planner | None = None) -> None:
+        m = config.machine
+        self.config = config
+        self.planner = planner
+        if stop_planner is None:
+            from lookahead.planning.heuristic import HeuristicPlanner
+
+            stop_planner = HeuristicPlanner(margin=1.0)
+        self.stop_planner = stop_planner
+        self.realtime = realtime
+        self.dt = m.dt
+        self.axes = tuple(m.axes)
+        self.limits = m.limits
+        self.path_scale = np.asarray(m.path_scale, dtype=float)
+        self.batch = config.service.batch
+        self.margin = config.planner.margin
+        self.horizon_len = horizon_length(self.limits, self.path_scale, config.planner.horizon_s)
+        self._every = max(1, round(REPLAN_EVERY_S / self.dt))
+        self._min_gap = max(1, round(REPLAN_MIN_S / self.dt))
+        self._start_wait = max(1, round(START_WAIT_S / self.dt))
+        self._retry = max(1, round(TRANSITION_RETRY_S / self.dt))
+        self._jobs: OrderedDict[str, _Job] = OrderedDict()
+        self._done: OrderedDict[str, None] = OrderedDict()
+        self._active: _Job | None = None
+        self._events: list[Event] = []
+        self._applied: list[tuple[str, int]] = []
+        self.override = 1.0
+        self.fault: str | None = None
+        self.plan_ms = 0.0
+        self.replans = 0
+        self.replan_failures = 0
+        self._last_k = 0
+        self._last_job: str | None = None
+
+    # --- input ------------------------------------------------------------------------
+    def submit(self, seg: Segment, now_s: float | None = None) -> list[Event]:
+        """Take in one decoded segment; returns the events it caused (also queued)."""
+        mark = len(self._events)
+        self._applied.append((seg.job, seg.seq))
+        if tuple(seg.axes) != self.axes:
+            self._reject(seg.job, seg.seq, f"axes: must equal the machine's axes "
+                         f"{list(self.axes)}, got {list(seg.axes)}")
+            return self._events[mark:]
+        if seg.job in self._done:
+            self._reject(seg.job, seg.seq, f"job: {seg.job!r} has already finished")
+            return self._events[mark:]
+        job = self._jobs.get(seg.job)
+        if job is None:
+            order = SegmentOrder(seg.job, self.config.service.gap_timeout_s)
+            geo = JobGeometry(seg.job, self.axes, self.path_scale, self.config.planner.fit)
+            job = _Job(seg.job, order, geo, tail=np.empty((0, len(self.axes))))
+        try:
+            ready = job.order.offer(seg, now_s)
+        except SegmentRejectedError as exc:
+            self._reject(seg.job, exc.seq, exc.reason)
+            ready = []
+        except JobFaultError as exc:
+            self._jobs.setdefault(job.id, job)
+            self._fault_job(job, str(exc))
+            return self._events[mark:]
+        while ready:
+            nxt = ready.pop()
+            try:
+                job.geo.add(nxt)
+            except SegmentRejectedError as exc:
+                self._reject(job.id, nxt.seq, exc.reason)
+                continue
+            ready = job.order.accepted(nxt)
+        if job.geo.nsegments or job.order.waiting:
+            self._jobs.setdefault(job.id, job)
+        return self._events[mark:]
+
+    def expire_gaps(self, now_s: float) -> list[Event]:
+        """Fault every job whose missing seq has waited longer than gap_timeout_s."""
+        mark = len(self._events)
+        for job in list(self._jobs.values()):
+            if job.fault is None and job.order.overdue(now_s):
+                self._fault_job(job, f"seq: segment {job.order.expected} of job {job.id!r} "
+                                f"did not arrive within {job.order.gap_timeout_s} s")
+        return self._events[mark:]
+
+    def reject(self, reason: str, job: str | None = None, seq: int | None = None) -> Event:
+        """A `rejected` event for a message that could not be decoded."""
+        return self._reject(job, seq, reason)
+
+    def drain_events(self) -> list[Event]:
+        out, self._events = self._events, []
+        return out
+
+    # --- output -----------------------------------------------------------------------
+    def next_batch(self) -> SetpointBatch | None:
+        """The next batch (see the module docstring for when it is None)."""
+        if self._active is None:
+            if self.fault is not None or not self._jobs:
+                return None
+            job = next(iter(self._jobs.values()))
+            if not self._ready_to_start(job):
+                return None
+            if job.geo.empty:
+                return self._empty_job(job)
+            self._active = job
+            job.started = True
+            self._emit("job_started", job.id, 0)
+        return self._produce(self._active)
+
+    def _ready_to_start(self, job: _Job) -> bool:
+        geo = job.geo
+        if geo.finished:
+            return True
+        if geo.path() is None:
+            return False
+        if geo.final_length >= self.horizon_len or job.wait >= self._start_wait:
+            return True
+        job.wait += self.batch
+        return False
+
+    def _empty_job(self, job: _Job) -> SetpointBatch:
+        """A job without motion: one sample at rest on its point."""
+        point = job.geo.first_point if job.geo.first_point is not None else np.zeros(
+            len(self.axes))
+        zeros = np.zeros((1, len(self.axes)))
+        batch = SetpointBatch(job.id, 0, 0, self.dt, self.axes, point.reshape(1, -1), zeros,
+                              zeros.copy(), True, applied=self._take_applied())
+        self._emit("job_started", job.id, 0)
+        self._finish(job, aborted=False)
+        return batch
+
+    def _produce(self, job: _Job) -> SetpointBatch | None:
+        self._maybe_replan(job)
+        plan = job.plan
+        assert plan is not None
+        k0, n = job.k, self.batch
+        final = False
+        if self._ending(job):
+            n = max(1, min(n, plan.k_end - k0 + 1))
+            final = k0 + n - 1 >= plan.k_end
+        elif not self.realtime and (job.hold or job.starved or self._at_sent_end(job)):
+            n = min(n, plan.k_end - k0 + 1)
+            if n <= 0:
+                return None
+        smp = plan.samples(k0, n, self.dt)
+        batch = SetpointBatch(job.id, job.batch_seq, k0, self.dt, self.axes, smp.pos, smp.vel,
+                              smp.acc, final, applied=self._take_applied())
+        job.k += n
+        job.batch_seq += 1
+        job.tail = np.vstack([job.tail, smp.pos])[-3:]
+        self._last_k, self._last_job = job.k - 1, job.id
+        if final:
+            self._finish(job, aborted=job.stop in ("abort", "fault"))
+        elif (job.k - 1 >= plan.k_end and not job.hold and not job.starved
+              and self._at_sent_end(job)):
+            job.starved = True
+            self._emit("starved", job.id, job.k - 1)
+        return batch
+
+    def _ending(self, job: _Job) -> bool:
+        """True when the committed plan ends the job (path end reached or a stop)."""
+        if job.stop in ("abort", "fault"):
+            return True
+        if job.hold or job.stop is not None or not job.geo.finished:
+            return False
+        path = job.geo.path()
+        return path is not None and job.plan.s_end >= path.length - self._tol(job)
+
+    def _at_sent_end(self, job: _Job) -> bool:
+        """The plan stops at the end of everything received, and the job is not complete."""
+        return (not job.geo.finished
+                and job.plan.s_end >= job.geo.sent_length - self._tol(job))
+
+    def _tol(self, job: _Job) -> float:
+        return S_TOL * max(job.geo.sent_length, 1.0)
+
+    def _take_applied(self) -> tuple[tuple[str, int], ...]:
+        out = tuple(self._applied)
+        self._applied.clear()
+        return out
+
+    # --- planning ---------------------------------------------------------------------
+    def _plan_limits(self) -> AxisLimits:
+        """Limits the planner plans to: margin, and the override as a time scaling
+        (v f, a f^2, j f^3) for f < 1."""
+        lim = self.limits.scaled(self.margin)
+        f = min(self.override, 1.0)
+        return AxisLimits(lim.vmax * f, lim.amax * f * f, lim.jmax * f**3)
+
+    def _request(self, job: _Job, start: PathState, s_end: float) -> PlanRequest:
+        path = job.geo.path()
+        return PlanRequest(path, self._plan_limits(), start, s_end, 0.0,
+                           job.geo.feed_cap(self.override), self.dt)
+
+    def _commit(self, job: _Job, start: PathState, s_end: float, k_plan: int) -> bool:
+        """Plan [start.s, s_end] anchored at k_plan; keep the old plan if it fails."""
+        request = self._request(job, start, s_end)
+        try:
+            plan = plan_checked(self.planner, request, k_plan, job.tail, self.limits)
+        except (PlanningError, ValueError, RuntimeError, ArithmeticError) as exc:
+            self.replan_failures += 1
+            job.last_fail = k_plan
+            log.log(logging.DEBUG if job.stop == "override" else logging.WARNING,
+                    "replan failed job=%s k=%d s=%.6g..%.6g: %s", job.id, k_plan,
+                        start.s, s_end, exc)
+            return False
+        job.plan = plan
+        job.planned_final = job.geo.final_length
+        job.force_replan = False
+        self.replans += 1
+        self.plan_ms = plan.compute_s * 1e3
+        return True
+
+    def _maybe_replan(self, job: _Job) -> None:
+        geo = job.geo
+        if job.plan is None:
+            self._first_plan(job)
+            return
+        k_last = job.k - 1
+        plan = job.plan
+        at_rest = k_last >= plan.k_end
+        if job.stop_request is not None:
+            self._begin_stop(job, job.stop_request)
+            job.stop_request = None
+            return
+        if job.stop in ("abort", "fault") or job.hold:
+            return
+        state = plan.state(k_last, self.dt)
+        if job.stop == "override":
+            if at_rest:
+                job.stop = None
+            else:
+                if k_last - job.last_try >= self._retry:
+                    job.last_try = k_last
+                    target = min(geo.final_length, state.s + self.horizon_len)
+                    if target > state.s and self._commit(job, state, target, k_last):
+                        job.stop = None
+                return
+        if job.override_pending:
+            job.override_pending = False
+            target = min(geo.final_length, state.s + self.horizon_len)
+            if target > state.s + self._tol(job) and not self._commit(job, state, target, k_last):
+                self._begin_stop(job, "override")
+                job.last_try = k_last
+            return
+        final = geo.final_length
+        if at_rest and plan.s_end >= final - self._tol(job) and geo.freeze():
+            final = geo.final_length
+        target = min(final, state.s + self.horizon_len)
+        if target <= plan.s_end + self._tol(job):
+            return
+        since = k_last - plan.k_plan
+        changed = final > job.planned_final + self._tol(job)
+        due = at_rest or job.force_replan or since >= self._every
+        if k_last - job.last_fail < self._min_gap and not at_rest:
+            return  # a replan just failed: the plan in force stays (it ends at rest)
+        if (due or (changed and since >= self._min_gap)) and self._commit(job, state, target,
+                                                                           k_last):
+            job.starved = False
+
+    def _first_plan(self, job: _Job) -> None:
+        path = job.geo.path()
+        assert path is not None
+        target = min(job.geo.final_length, self.horizon_len)
+        job.plan = rest_plan(path, 0.0, 0)
+        if target > self._tol(job) and not self._commit(job, PathState(0.0), target, 0):
+            self._fault_job(job, f"planning: no valid plan from the start of job {job.id!r}")
+            job.stop, job.stop_request = "fault", None
+
+    def _begin_stop(self, job: _Job, kind: str) -> None:
+        """Replace the plan with the shortest stop within the limits (from the last
+        published sample); the current plan, which ends at rest, is the fallback."""
+        plan = job.plan
+        assert plan is not None
+        job.stop = kind
+        if kind == "hold":
+            job.hold = True
+        k_last = job.k - 1
+        if k_last < 0:
+            job.plan = rest_plan(plan.path, 0.0, 0)
+            return
+        state = plan.state(k_last, self.dt)
+        if k_last >= plan.k_end:
+            job.plan = rest_plan(plan.path, plan.s_end, k_last)
+            return
+        full = self.limits.scaled(self.margin)
+        stop = None
+        if kind == "override":
+            # slow down with the new acceleration and jerk (full feed limits), so that the
+            # state soon fits the new limits and the new plan can take over mid-motion
+            f = min(self.override, 1.0)
+            gentle = AxisLimits(full.vmax, full.amax * f * f, full.jmax * f**3)
+            base = PlanRequest(plan.path, gentle, state, plan.s_end, 0.0, None, self.dt)
+            stop = shortest_stop(self.stop_planner, base, k_last, job.tail, self.limits,
+                                 plan.s_end, iterations=6)
+        if stop is None:
+            base = PlanRequest(plan.path, full, state, plan.s_end, 0.0, None, self.dt)
+            stop = shortest_stop(self.stop_planner, base, k_last, job.tail, self.limits,
+                                 plan.s_end)
+        if stop is not None:
+            job.plan = stop
+            self.plan_ms = stop.compute_s * 1e3
+        log.info("stop (%s) job=%s k=%d from s=%.6g v=%.6g: rest at s=%.6g, k=%d", kind,
+                 job.id, k_last, state.s, state.v, job.plan.s_end, job.plan.k_end)
+
+    # --- commands ---------------------------------------------------------------------
+    def command(self, cmd: Command) -> CommandReply:
+        """Apply hold / resume / override / abort / reset (effects at the next batch)."""
+        job = self._active
+        if cmd.verb == "override":
+            assert cmd.value is not None
+            self.override = float(cmd.value)
+            if job is not None:
+                job.override_pending = True
+            return CommandReply(True)
+        if cmd.verb == "reset":
+            self.fault = None
+            return CommandReply(True)
+        if cmd.verb == "hold":
+            if job is None:
+                return CommandReply(False, "hold: no job is running")
+            if not job.hold and job.stop not in ("abort", "fault"):
+                job.stop_request = "hold"
+                job.hold = True
+            return CommandReply(True)
+        if cmd.verb == "resume":
+            if job is None or not job.hold:
+                return CommandReply(False, "resume: not holding")
+            if job.stop_request == "hold":
+                job.stop_request = None
+            job.hold = False
+            if job.stop == "hold":
+                job.stop = None
+            job.force_replan = True
+            return CommandReply(True)
+        if cmd.verb == "abort":
+            if job is not None:
+                if job.stop not in ("abort", "fault"):
+                    job.stop_request = "abort"
+                return CommandReply(True)
+            if self._jobs:
+                queued = next(iter(self._jobs.values()))
+                self._emit("job_finished", queued.id, 0, duration_s=0.0, aborted=True)
+                self._drop(queued)
+                return CommandReply(True)
+            return CommandReply(False, "abort: no job")
+        return CommandReply(False, f"verb: unknown command {cmd.verb!r}")
+
+    def fail(self, reason: str) -> None:
+        """An internal failure outside planning: stop the active job and fault; if it
+        already failed once, drop it (its stop cannot be produced)."""
+        job = self._active
+        if job is None:
+            self.fault = reason
+            self._emit("fault", None, self._last_k, reason=reason)
+        elif job.fault is None:
+            self._fault_job(job, reason)
+        else:
+            self._emit("job_finished", job.id, max(job.k - 1, 0),
+                       duration_s=max(job.k - 1, 0) * self.dt, aborted=True)
+            self._drop(job)
+
+    # --- status -----------------------------------------------------------------------
+    def status(self) -> Status:
+        job = self._active
+        name = self.planner.name
+        if job is None:
+            state = "fault" if self.fault else "idle"
+            queued = sum(j.geo.nsegments + j.order.waiting for j in self._jobs.values())
+            head = next(iter(self._jobs), None)
+            return Status(state, head or self._last_job, self._last_k, queued, 0.0,
+                          self.override, name, self.plan_ms, self.fault)
+        if self.fault or job.fault:
+            state = "fault"
+        elif job.hold:
+            state = "holding"
+        elif job.starved:
+            state = "starved"
+        else:
+            state = "running"
+        k_last = max(job.k - 1, 0)
+        s_now = job.plan.state(k_last, self.dt).s if job.plan is not None else 0.0
+        ends = job.geo.segment_ends_s()
+        queued = int(np.sum(ends > s_now + self._tol(job))) + job.order.waiting
+        queued += sum(j.geo.nsegments + j.order.waiting for j in self._jobs.values()
+                      if j is not job)
+        horizon = job.plan.remaining_s(k_last, self.dt) if job.plan is not None else 0.0
+        return Status(state, job.id, k_last, queued, horizon, self.override, name,
+                      self.plan_ms, self.fault or job.fault)
+
+    @property
+    def active_job(self) -> str | None:
+        return self._active.id if self._active is not None else None
+
+    @property
+    def busy(self) -> bool:
+        """True while a job is active or queued."""
+        return self._active is not None or bool(self._jobs)
+
+    # --- bookkeeping ------------------------------------------------------------------
+    def _emit(self, etype: str, job: str | None, k: int, **extra) -> Event:
+        event = Event(etype, job, int(k), extra)
+        self._events.append(event)
+        return event
+
+    def _reject(self, job: str | None, seq: int | None, reason: str) -> Event:
+        k = self._active.k - 1 if self._active is not None and job == self._active.id else 0
+        return self._emit("rejected", job, max(k, 0), seq=seq, reason=reason)
+
+    def _fault_job(self, job: _Job, reason: str) -> None:
+        log.error("fault job=%s: %s", job.id, reason)
+        k = max(job.k - 1, 0)
+        if reason.startswith("seq:"):
+            self._emit("rejected", job.id, k, seq=job.order.expected, reason=reason)
+        self._emit("fault", job.id, k, reason=reason)
+        self.fault = reason
+        job.fault = reason
+        if job is self._active:
+            job.stop_request = "fault"
+            job.hold = False
+        else:
+            self._emit("job_finished", job.id, 0, duration_s=0.0, aborted=True)
+            self._drop(job)
+
+    def _finish(self, job: _Job, aborted: bool) -> None:
+        extra = {"aborted": True} if aborted else {}
+        self._emit("job_finished", job.id, job.k - 1 if job.k else 0,
+                   duration_s=max(job.k - 1, 0) * self.dt, **extra)
+        self._drop(job)
+
+    def _drop(self, job: _Job) -> None:
+        self._jobs.pop(job.id, None)
+        self._done[job.id] = None
+        while len(self._done) > MAX_DONE:
+            self._done.popitem(last=False)
+        if self._active is job:
+            self._active = None
+
+
+def horizon_length(limits: AxisLimits, path_scale: np.ndarray, horizon_s: float) -> float:
+    """Look-ahead window length (path units): horizon_s at the nominal top feed, or three
+    S-curve braking distances from it at the smallest path-level limits, whichever is
+    larger (DESIGN.md: W >= 3 braking distances lost no time)."""
+    v = float(np.linalg.norm(limits.vmax * path_scale))
+    a = float(np.min(limits.amax * path_scale))
+    j = float(np.min(limits.jmax * path_scale))
+    braking = v * (v / a + a / j) / 2.0 if v >= a * a / j else v * math.sqrt(v / j)
+    return max(horizon_s * v, 3.0 * braking)

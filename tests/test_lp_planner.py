@@ -1,0 +1,181 @@
+"""LP planner: rows against the chain rule, the LP solution at the nodes, the sampled
+profile under the finite-difference checker, re-linearization, windows."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from lookahead.checker import check_positions
+from lookahead.geometry.spline_path import fit_points
+from lookahead.limits import AxisLimits
+from lookahead.planning.base import PathState, PlanRequest
+from lookahead.planning.grid_profile import consistent_durations, grid_time
+from lookahead.planning.lp import LPPlanner, Tightening
+from lookahead.planning.lp_envelope import reachable_q
+from lookahead.planning.lp_rows import (
+    GridGeometry,
+    fd_weights,
+    jerk_rows,
+    nodal_acceleration,
+    nodal_jerk,
+)
+from lookahead.planning.window import WindowedLP, concatenate, truncate
+from lookahead.sampling import sample_plan
+
+LIMITS = AxisLimits(np.array([500.0, 720.0]), np.array([2000.0, 3000.0]),
+                    np.array([20000.0, 30000.0]))
+SCALE = np.array([1.0, np.pi / 180 * 100])
+DT = 0.001
+
+
+@pytest.fixture(scope="module")
+def path():
+    """A winder-like stroke and back: X sweeps 0..400 mm while C turns 540 deg."""
+    th = np.linspace(0.0, 2.0 * np.pi, 300)
+    pts = np.column_stack([200.0 * (1 - np.cos(th)) + 30.0 * np.sin(3 * th),
+                           np.degrees(th) * 1.5])
+    return fit_points(pts, SCALE)
+
+
+@pytest.fixture(scope="module")
+def whole(path):
+    req = PlanRequest(path, LIMITS, PathState(0.0), path.length)
+    return req, LPPlanner().plan(req)
+
+
+def checker_ok(path, profile):
+    rep = check_positions(sample_plan(path, profile, DT).pos, LIMITS, DT)
+    return rep
+
+
+def test_fd_weights_exact_for_quadratics():
+    rng = np.random.default_rng(1)
+    s = np.cumsum(rng.uniform(0.2, 2.0, 12))
+    q = 3.0 + 2.0 * s - 0.7 * s**2
+    w1, w2 = fd_weights(s)
+    d1 = w1[:, 0] * q[:-2] + w1[:, 1] * q[1:-1] + w1[:, 2] * q[2:]
+    d2 = w2[:, 0] * q[:-2] + w2[:, 1] * q[1:-1] + w2[:, 2] * q[2:]
+    np.testing.assert_allclose(d1, 2.0 - 1.4 * s[1:-1], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(d2, -1.4, rtol=1e-9)
+
+
+def test_nodal_kinematics_match_time_differentiation(path):
+    """x(s(t)) differentiated in t numerically equals the q-form rows at the nodes."""
+    s = np.linspace(100.0, 140.0, 4001)
+    q = (300.0 + 2.0 * (s - 100.0)) ** 2  # ds/dt = 300 + 2 (s - 100): s(t) is exponential
+    geo = GridGeometry.sample(path, s)
+    acc, jerk = nodal_acceleration(geo, q), nodal_jerk(geo, q)
+
+    def s_of_t(t):
+        return 100.0 + 150.0 * np.expm1(2.0 * t)
+
+    h = 2e-4
+    for i in (500, 2000, 3500):  # interior node i + 1
+        t_i = np.log1p((s[i + 1] - 100.0) / 150.0) / 2.0
+        x = path.eval_s(s_of_t(t_i + h * np.arange(-2, 3)), 0)[0]
+        a_num = (x[3] - 2 * x[2] + x[1]) / h**2
+        j_num = (x[4] - 2 * x[3] + 2 * x[1] - x[0]) / (2 * h**3)
+        np.testing.assert_allclose(acc[i], a_num, rtol=1e-3, atol=0.5)
+        np.testing.assert_allclose(jerk[i], j_num, rtol=1e-2, atol=50.0)
+
+
+def test_lp_solution_satisfies_its_nodal_rows(whole, path):
+    _, res = whole
+    s, q = res.info["grid_s"], res.info["grid_q"]
+    geo = GridGeometry.sample(path, s)
+    assert np.all(np.abs(geo.d1) * np.sqrt(q)[:, None] <= LIMITS.vmax * (1 + 1e-7))
+    assert np.all(np.abs(nodal_acceleration(geo, q)) <= LIMITS.amax * (1 + 1e-6))
+    # the tangent rows are conservative: the nonlinear nodal jerk is within the limit
+    assert np.all(np.abs(nodal_jerk(geo, q)) <= LIMITS.jmax * (1 + 1e-6))
+    assert q[0] == 0.0 and q[-1] == 0.0
+
+
+def test_previous_solution_feasible_for_relinearized_rows(whole, path):
+    """Why re-linearizing never loses time: the last solution satisfies the new rows."""
+    _, res = whole
+    s, q = res.info["grid_s"], res.info["grid_q"]
+    geo = GridGeometry.sample(path, s)
+    rows = jerk_rows(geo, LIMITS.jmax, np.ones(s.size), q, 1e-9)
+    assert np.all(rows.A @ q <= rows.upper + 1e-6 * np.abs(rows.upper))
+
+
+def test_relinearization_never_increases_time(path):
+    req = PlanRequest(path, LIMITS, PathState(0.0), path.length)
+    planner = LPPlanner(max_passes=4)
+    s, stops = planner.grid(req)
+    geo = GridGeometry.sample(path, s)
+    plan = planner.solve_grid(req, geo, Tightening.uniform(s.size, 1.0, 1.0, 1.0), stops)
+    times = plan.pass_times
+    assert len(times) >= 2
+    accepted = [times[0]]
+    for t in times[1:-1]:
+        assert t <= accepted[-1] * (1 + 1e-4)
+        accepted.append(t)
+    assert plan.time_s == pytest.approx(min(times))
+    assert plan.time_s == pytest.approx(grid_time(s, plan.q))
+
+
+def test_sampled_lp_passes_checker(whole, path):
+    _, res = whole
+    rep = checker_ok(path, res.profile)
+    assert rep.violations == 0, rep.first
+    # and it uses the machine: some limit is nearly reached
+    assert max(max(v) for v in rep.peak_fraction.values()) > 0.9
+    end = res.profile.at(np.array([res.profile.duration]))
+    assert end[0, 0] == pytest.approx(path.length, abs=1e-6)
+    assert abs(end[1, 0]) < 1e-6 and abs(end[2, 0]) < 1e-3
+
+
+def test_windows_from_random_start_states_are_continuous(whole, path):
+    req, res = whole
+    rng = np.random.default_rng(7)
+    pp = res.profile.s_of_t
+    planner = LPPlanner()
+    for k in rng.integers(pp.x.size // 10, pp.x.size // 2, size=3):
+        t_c = float(pp.x[k])
+        start = res.profile.state_at(t_c)
+        window = replace(req, start=start, s_end=min(start.s + 600.0, path.length))
+        new = planner.plan(window)
+        s0, v0, a0, _ = new.profile.at(np.array([0.0]))[:, 0]
+        assert (s0, v0, a0) == pytest.approx((start.s, start.v, start.a), rel=1e-9, abs=1e-9)
+        stitched = concatenate([truncate(res.profile, t_c), new.profile])
+        rep = checker_ok(path, stitched)
+        assert rep.violations == 0, rep.first
+
+
+def test_windowed_lp_close_to_whole_and_within_limits(whole, path):
+    req, res = whole
+    win = WindowedLP(window_s=700.0).plan(req)
+    assert win.info["windows"] >= 2 and win.info["fallbacks"] == 0
+    assert win.profile.duration <= res.profile.duration * 1.01
+    assert checker_ok(path, win.profile).violations == 0
+
+
+def test_reachable_q_is_the_constant_jerk_start():
+    J, A = 1000.0, 1e9
+    t = np.array([0.01, 0.1, 0.5])
+    q = reachable_q(J * t**3 / 6.0, 0.0, 0.0, J, A)
+    np.testing.assert_allclose(np.sqrt(q), J * t**2 / 2.0, rtol=1e-9)
+
+
+def test_consistent_duration_exact_for_constant_jerk():
+    J, t = 500.0, np.array([0.02, 0.3])
+    T = consistent_durations(J * t**3 / 6, np.zeros(2), np.zeros(2), J * t**2 / 2, J * t)
+    np.testing.assert_allclose(T, t, rtol=1e-12)
+
+
+def test_osqp_backend_never_returns_an_unchecked_profile(path):
+    """OSQP (ADMM) does not reliably converge on this LP (see the report); whatever it
+    returns must still pass the checker, else the planner raises PlanningError."""
+    from lookahead.planning.base import PlanningError
+
+    req = PlanRequest(path, LIMITS, PathState(0.0), 150.0)
+    try:
+        res = LPPlanner(solver="osqp").plan(req)
+    except PlanningError as err:
+        assert "osqp" in str(err) or "limits" in str(err)
+        return
+    assert checker_ok(path, res.profile).violations == 0

@@ -1,0 +1,202 @@
+"""The planner service on a real zenoh bus (loopback, random ports), `--fast` mode."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import msgpack
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from lookahead.geometry.winding import preset_points
+from lookahead.protocol import Status
+from service_harness import (
+    Harness,
+    check_job,
+    point_segments,
+    random_sizes,
+    service_config,
+)
+
+
+@pytest.fixture
+def harness_factory():
+    made: list[Harness] = []
+
+    def make(method: str = "heuristic", fast: bool = True, **service) -> Harness:
+        h = Harness(service_config(method, **service), fast=fast)
+        made.append(h)
+        return h
+
+    yield make
+    for h in made:
+        h.close()
+
+
+def _stream(h: Harness, job: str, points: np.ndarray, seed: int) -> None:
+    for seg in point_segments(job, points, random_sizes(np.random.default_rng(seed),
+                                                        len(points))):
+        h.send(seg)
+
+
+@pytest.mark.parametrize(("preset", "method"), [
+    ("tube-1450", "heuristic"),
+    pytest.param("tube-1450", "lp", marks=pytest.mark.slow),
+    pytest.param("tube-9570", "heuristic", marks=pytest.mark.slow),
+    pytest.param("tube-9570", "lp", marks=pytest.mark.slow),
+])
+def test_preset_streamed_in_random_chunks(harness_factory, preset, method):
+    h = harness_factory(method)
+    _, pts, _ = preset_points(preset)
+    _stream(h, "job-a", pts, seed=len(pts))
+    batches = h.wait_final("job-a", timeout=600)
+    pos, _, _ = check_job(batches, h.cfg, pts[0], pts[-1])
+    finished = h.wait_event("job_finished", "job-a")[0]
+    assert finished.extra["duration_s"] == pytest.approx((len(pos) - 1) * h.cfg.machine.dt)
+    assert not h._events_of("rejected", None) and not h._events_of("fault", None)
+    # the samples pass through the programmed points (the path interpolates them)
+    mid = pts[len(pts) // 2]
+    assert np.min(np.linalg.norm(pos - mid, axis=1)) < 1.0
+
+
+def test_hold_resume_then_abort_keep_limits(harness_factory):
+    h = harness_factory()
+    _, pts, _ = preset_points("tube-1450")
+    _stream(h, "job-h", pts, seed=1)
+    h.wait_for(lambda: sum(b.n for b in h.batches) > 1500, what="1500 samples")
+    assert h.command("hold").ok
+    def at_rest() -> bool:
+        st = Status.decode(h.status_bytes())
+        return st.state == "holding" and st.horizon_s == 0.0
+
+    h.wait_for(at_rest, what="holding at rest")
+    n_held = sum(b.n for b in h.job_batches("job-h"))
+    last = h.job_batches("job-h")[-1]
+    np.testing.assert_allclose(last.vel[-1], 0.0, atol=1e-9)
+    assert h.command("resume").ok
+    h.wait_for(lambda: sum(b.n for b in h.batches) > n_held + 1000, what="motion again")
+    assert h.command("abort").ok
+    batches = h.wait_final("job-h")
+    pos, _, _ = check_job(batches, h.cfg, pts[0], h.job_batches("job-h")[-1].pos[-1])
+    assert h.wait_event("job_finished", "job-h")[0].extra.get("aborted") is True
+    assert np.linalg.norm(pos[-1] - pts[-1]) > 1.0  # stopped short of the end
+    assert not h.command("resume").ok  # nothing to resume any more
+
+
+def test_override_half_and_back_keeps_limits(harness_factory):
+    h = harness_factory()
+    _, pts, _ = preset_points("tube-1450")
+    _stream(h, "job-o", pts, seed=2)
+    h.wait_for(lambda: sum(b.n for b in h.batches) > 1200, what="1200 samples")
+    assert h.command("override", 0.5).ok
+    h.wait_for(lambda: sum(b.n for b in h.batches) > 5000, what="5000 samples")
+    assert h.command("override", 1.0).ok
+    batches = h.wait_final("job-o", timeout=60)
+    _, vel, _ = check_job(batches, h.cfg, pts[0], pts[-1])
+    vmax = np.asarray(h.cfg.machine.vmax)
+    # before the change an axis runs faster than half its limit; well after it, none does
+    assert np.any(np.abs(vel[:1200]) > 0.6 * vmax)
+    assert np.all(np.abs(vel[3500:4500]) <= 0.5 * vmax * (1 + 1e-9))
+    assert np.any(np.abs(vel[-3000:]) > 0.6 * vmax)  # and back to full speed
+    assert not h.command("override", 2.0).ok  # out of range
+
+
+def test_publisher_stops_half_way_then_finishes(harness_factory):
+    h = harness_factory()
+    _, pts, _ = preset_points("tube-1450")
+    segs = point_segments("job-s", pts, random_sizes(np.random.default_rng(3), len(pts)))
+    half = len(segs) // 2
+    for seg in segs[:half]:
+        h.send(seg)
+    starved = h.wait_event("starved", "job-s", timeout=30)[0]
+    batches = h.job_batches("job-s")
+    sent_end = segs[half - 1].points[-1]
+    np.testing.assert_allclose(batches[-1].pos[-1], sent_end, atol=1e-6)
+    np.testing.assert_allclose(batches[-1].vel[-1], 0.0, atol=1e-9)
+    assert starved.k == batches[-1].k0 + batches[-1].n - 1
+    assert Status.decode(h.status_bytes()).state == "starved"
+    for seg in segs[half:]:
+        h.send(seg)
+    check_job(h.wait_final("job-s"), h.cfg, pts[0], pts[-1])
+
+
+def _malformed(rng: np.random.Generator, i: int) -> bytes:
+    good = {"v": 1, "job": "bad", "seq": i, "axes": ["X", "C"], "kind": "points",
+            "last": False, "points": [[0.0, 0.0], [1.0, 1.0]]}
+    kind = i % 20
+    msg = dict(good)
+    if kind == 0:
+        return rng.bytes(int(rng.integers(0, 64)))
+    if kind == 1:
+        return msgpack.packb([1, 2, 3])
+    if kind == 2:
+        del msg[["v", "job", "seq", "axes", "kind", "last"][i % 6]]
+    elif kind == 3:
+        msg["v"] = 2
+    elif kind == 4:
+        msg["job"] = "no spaces allowed"
+    elif kind == 5:
+        msg["seq"] = -1
+    elif kind == 6:
+        msg["axes"] = ["X", "Y"]
+    elif kind == 7:
+        msg["kind"] = "arc"
+    elif kind == 8:
+        msg["points"] = [[0.0, math.nan]]
+    elif kind == 9:
+        msg["points"] = [[0.0, 1.0], [2.0]]
+    elif kind == 10:
+        msg["points"] = []
+    elif kind == 11:
+        msg["fit"] = "linear"
+    elif kind == 12:
+        msg["feed"] = -5.0
+    elif kind == 13:
+        msg.update(kind="bspline", degree=3, ctrl=[[0, 0], [1, 1], [2, 0], [3, 1]],
+                   knots=[0, 0, 0, 1, 1, 1])
+    elif kind == 14:
+        msg.update(kind="nurbs", degree=2, ctrl=[[0, 0], [1, 1], [2, 0]],
+                   knots=[0, 0, 0, 1, 1, 1], weights=[1, -1, 1])
+    elif kind == 15:
+        msg.update(kind="bspline", degree=9, ctrl=[[0, 0], [1, 1]], knots=[0, 1])
+    elif kind == 16:
+        msg["last"] = "yes"
+    elif kind == 17:
+        msg["seq"] = 1.5
+    elif kind == 18:
+        msg["points"] = "1,2"
+    else:
+        return msgpack.packb({"v": 1}) + b"\xc1"
+    return msgpack.packb(msg)
+
+
+def test_malformed_messages_are_rejected_then_a_job_is_perfect(harness_factory):
+    h = harness_factory()
+    rng = np.random.default_rng(4)
+    for i in range(1000):
+        h.send(_malformed(rng, i))
+    rejected = h.wait_event("rejected", count=1000, timeout=30)
+    assert len(rejected) == 1000
+    assert all(isinstance(e.extra.get("reason"), str) and e.extra["reason"] for e in rejected)
+    # the reason names the field, e.g. "points[0][1]: must be finite"
+    assert any(e.extra["reason"].startswith("points[0][1]") for e in rejected)
+    assert any(e.extra["reason"].startswith("axes") for e in rejected)
+    assert not h.batches
+    _, pts, _ = preset_points("tube-1450")
+    _stream(h, "good", pts, seed=5)
+    check_job(h.wait_final("good"), h.cfg, pts[0], pts[-1])
+    assert not h._events_of("fault", None)
+
+
+def test_status_queryable_and_liveliness(harness_factory):
+    h = harness_factory()
+    status = Status.decode(h.status_bytes())
+    assert status.state == "idle" and status.planner == "heuristic"
+    replies = list(h.client.liveliness().get(f"{h.ns}/alive/planner", timeout=5.0))
+    assert [str(r.ok.key_expr) for r in replies] == [f"{h.ns}/alive/planner"]
+    reply = h.command("hold")
+    assert not reply.ok and "no job" in reply.error
