@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import pytest
@@ -123,3 +124,23 @@ def test_cli_check_exit_codes(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     assert "planner.method" in capsys.readouterr().err
     assert main(["config", "check", str(tmp_path / "missing.toml")]) == 2
     assert "cannot read" in capsys.readouterr().err
+
+
+def test_bus_options_become_config_overrides(monkeypatch: pytest.MonkeyPatch,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    for var in ("LOOKAHEAD_MACHINE_ID", "LOOKAHEAD_ZENOH_MODE", "LOOKAHEAD_ZENOH_CONNECT",
+                "LOOKAHEAD_ZENOH_LISTEN", "LOOKAHEAD_ZENOH_CONFIG_FILE"):
+        monkeypatch.setenv(var, "")  # records the original, so the test's changes are undone
+        monkeypatch.delenv(var)
+    assert main(["config", "show"]) == 0
+    capsys.readouterr()
+    code = main(["config", "--machine-id", "w7", "--zenoh-mode", "client",
+                 "--connect", "tcp/router:7447", "--connect", "tcp/backup:7447",
+                 "--listen", "", "show"])
+    assert code == 0
+    cfg = load_config(None)
+    assert cfg.ns == "lookahead/w7"
+    assert cfg.zenoh.mode == "client"
+    assert cfg.zenoh.connect == ("tcp/router:7447", "tcp/backup:7447")
+    assert cfg.zenoh.listen == ()
+    assert os.environ["LOOKAHEAD_ZENOH_CONNECT"] == "tcp/router:7447,tcp/backup:7447"

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 
@@ -28,6 +29,38 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
 }
 
 EXIT_NOT_BUILT = 3
+
+#: bus options every subcommand takes -> the configuration's environment override
+BUS_OPTIONS: dict[str, str] = {
+    "machine_id": "LOOKAHEAD_MACHINE_ID",
+    "zenoh_mode": "LOOKAHEAD_ZENOH_MODE",
+    "connect": "LOOKAHEAD_ZENOH_CONNECT",
+    "listen": "LOOKAHEAD_ZENOH_LISTEN",
+    "zenoh_config": "LOOKAHEAD_ZENOH_CONFIG_FILE",
+}
+
+
+def _add_bus_options(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group(
+        "bus", "override the configuration's machine id and zenoh session (the same as the "
+        "LOOKAHEAD_MACHINE_ID / LOOKAHEAD_ZENOH_* environment variables)")
+    group.add_argument("--machine-id", metavar="ID", help="namespace lookahead/ID")
+    group.add_argument("--zenoh-mode", choices=("peer", "client", "router"))
+    group.add_argument("--connect", metavar="ENDPOINT", action="append",
+                       help="connect to ENDPOINT, e.g. tcp/router:7447 (repeatable)")
+    group.add_argument("--listen", metavar="ENDPOINT", action="append",
+                       help="listen on ENDPOINT (repeatable; '' for none)")
+    group.add_argument("--zenoh-config", metavar="FILE",
+                       help="zenoh JSON5 config file (TLS, credentials, access control)")
+
+
+def _export_bus_options(args: argparse.Namespace) -> None:
+    """Bus options become environment overrides, read by `load_config` here and inherited
+    by the subprocesses a command starts (the demo)."""
+    for attr, var in BUS_OPTIONS.items():
+        value = getattr(args, attr, None)
+        if value is not None:
+            os.environ[var] = ",".join(value) if isinstance(value, list) else value
 
 
 def _not_built(name: str, module: str, reason: str):
@@ -57,6 +90,8 @@ def build_parser() -> argparse.ArgumentParser:
             stub.set_defaults(func=_not_built(name, module_name, "module missing"))
             continue
         p = module.add_parser(sub, name, help_text)
+        if name != "plan":  # plans offline, never touches the bus
+            _add_bus_options(p)
         p.set_defaults(func=module.run)
     return parser
 
@@ -67,6 +102,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)
         return 2
+    _export_bus_options(args)
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
