@@ -356,7 +356,12 @@ class PlannerService:
                      batch.k0 + batch.n - 1)
 
     def _publish_events(self) -> None:
-        for event in self.engine.drain_events():
+        events = self.engine.drain_events()
+        if events:
+            # a client that sees an event and then asks for the status must not get an
+            # answer older than the event
+            self._status_payload = self.engine.status().encode()
+        for event in events:
             if event.type == "rejected":
                 self.stats.rejected += 1
             self._pub_events.put(event.encode())

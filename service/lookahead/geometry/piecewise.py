@@ -128,6 +128,10 @@ class PiecewisePath(Path):
     def breakpoints_s(self) -> np.ndarray:
         return self._table.s_knots.copy()
 
+    def breakpoints_u(self) -> np.ndarray:
+        """The breakpoints in u, matching `breakpoints_s()` entry by entry."""
+        return self._knots.copy()
+
     @property
     def interval_lengths(self) -> tuple[np.ndarray, np.ndarray]:
         """(lengths, quadrature split) per knot interval, for reuse by streaming fits."""

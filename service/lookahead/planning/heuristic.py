@@ -13,15 +13,21 @@ kinematic compatibility, axis limits verified along the path and repaired.
    feasibility, and if it cannot even stop there it is merged with the next segment.
 4. One Ruckig S-curve per segment (1 DOF along s) -> phases -> s(t) as a PPoly.
 5. Verification of axis velocity, acceleration and jerk at the check points between the
-   budget points; failing segments get their V, A, J lowered and steps 2-5 repeat.
+   budget points; failing segments get their V, A, J lowered and steps 2-5 repeat. A
+   profile that still fails raises PlanningError (never an unverified profile).
+6. A start above the limits (the service replans after an override down or a lower feed
+   cap): first a brake (Ruckig's velocity interface) down to the feed limit within the
+   limits time-scaled by the smallest factor that admits the start state, then steps 1-5.
 """
 
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
+from lookahead.limits import AxisLimits
 from lookahead.planning.base import (
     FeedProfile,
     PathState,
@@ -30,6 +36,7 @@ from lookahead.planning.base import (
     PlanResult,
 )
 from lookahead.planning.path_limits import (
+    BUDGET_FRACTIONS,
     BudgetShares,
     PathGrid,
     SegmentBudgets,
@@ -85,16 +92,51 @@ class HeuristicPlanner:
         grid = build_grid(request.path, start.s, s_end, request.dt, limits, self.shares,
                           request.feed_cap, self.max_cell)
         vlim = feed_limit(grid, limits, self.shares, request.feed_cap)
+        info: dict = {}
+        first_problem = ""
+        if not self._start_above_limits(request, grid, vlim):
+            try:
+                phases, core = self._plan_phases(request, grid, vlim, limits)
+                return self._result(build_profile(phases), t_start, {**info, **core})
+            except PlanningError as exc:
+                if start.v == 0 and start.a == 0:
+                    raise
+                first_problem = str(exc)  # perhaps the start acceleration is too high
+        # brake to the limits first; if the rest cannot follow from there (the window is
+        # too short for that feed), brake to a lower feed
+        problem = ""
+        for fraction in _BRAKE_TARGETS:
+            brake, g = self._brake(request, grid, vlim, limits, fraction)
+            end = _end_state(brake)
+            if not end.s < s_end:
+                break
+            rest = replace(request, start=end)
+            rest_grid = build_grid(request.path, end.s, s_end, request.dt, limits,
+                                   self.shares, request.feed_cap, self.max_cell)
+            rest_vlim = feed_limit(rest_grid, limits, self.shares, request.feed_cap)
+            try:
+                phases, core = self._plan_phases(rest, rest_grid, rest_vlim, limits)
+            except PlanningError as exc:
+                problem = str(exc)
+                continue
+            info = {"brake_scale": g, "brake_target": fraction, **core}
+            profile = build_profile(concat_phases([brake, phases]))
+            return self._result(profile, t_start, info)
+        raise PlanningError("the start state cannot slow down to the limits within the "
+                            f"window [{start.s}, {s_end}]: {first_problem} {problem}")
+
+    def _plan_phases(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
+                     limits: AxisLimits) -> tuple[Phases, dict]:
+        """Segments, S-curves, verification and repair from a start within the limits."""
         starts = choose_segments(grid, vlim, self.band_ratio)
         factor = np.ones(starts.size - 1)
         info: dict = {"rounds": 0, "verified": False}
-        profile = None
+        phases = None
         for round_ in range(self.repair_rounds):
             budgets = segment_budgets(grid, starts, vlim, limits, self.shares, factor)
             phases, starts, factor, budgets = self._profile_phases(request, grid, starts,
                                                                    factor, budgets, vlim)
-            profile = build_profile(phases)
-            failing = self._failing_segments(profile, grid, starts, request)
+            failing = self._failing_segments(build_profile(phases), grid, starts, request)
             info["rounds"] = round_ + 1
             if not failing.any():
                 info["verified"] = True
@@ -102,7 +144,107 @@ class HeuristicPlanner:
             factor = np.where(failing, factor * 0.85, factor)
         info["segments"] = int(starts.size - 1)
         info["cells"] = grid.ncells
-        return self._result(profile, t_start, info)
+        if not info["verified"]:
+            raise PlanningError(f"heuristic: no profile within the limits after "
+                                f"{info['rounds']} repair rounds")
+        return phases, info
+
+    # --- a start state above the limits (override down, lower feed cap) ---------------
+    def _start_above_limits(self, request: PlanRequest, grid: PathGrid,
+                            vlim: np.ndarray) -> bool:
+        """True if the start feed is beyond the first cell's feed limit even with the
+        stretch `_first_segment` grants (1 / margin). A too high start acceleration shows
+        as a failure of the normal plan, which then falls back to a brake."""
+        return bool(request.start.v > vlim[0] / self.margin)
+
+    def _brake(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
+               limits: AxisLimits, fraction: float) -> tuple[Phases, float]:
+        """The fastest feed change from the start state down to `fraction` of the feed
+        limit, path acceleration 0, that keeps every axis within the limits time-scaled
+        by g (v g, a g^2, j g^3), g >= 1 as small as found (coarse scan, then bisection).
+        The start came from a plan under limits the service scaled down (override) or
+        under a higher feed cap, so a g that fits the start exists (the old limits).
+        Verified at the grid points; raises PlanningError if no brake is found."""
+
+        def fits(g: float) -> bool:
+            return self._brake_at(request, grid, vlim, limits, g, 1.0, fraction) is not None
+
+        st = request.start
+        lo, hi = None, None
+        for g in _BRAKE_SCALES:
+            if fits(g):
+                hi = g
+                break
+            lo = g
+        if hi is None:
+            raise PlanningError(f"the start state (v={st.v:.6g}, a={st.a:.6g}) cannot be "
+                                "brought within the limits")
+        if lo is not None:
+            for _ in range(12):  # the start fits from some g on: bisect for it
+                mid = float(np.sqrt(lo * hi))
+                lo, hi = (lo, mid) if fits(mid) else (mid, hi)
+        # the brake is judged at the scaling the start state itself needs (1 if it is
+        # within the request's limits): the budget model's conservatism gets no room
+        check = _time_scaled(request.limits, max(1.0, _state_scale(request, grid) * (1 + 1e-6)))
+        for shrink in _BRAKE_SHRINK:
+            found = self._brake_at(request, grid, vlim, limits, hi, shrink, fraction)
+            if found is None:
+                break
+            phases, ncell = found
+            if not self._brake_fails(phases, grid, ncell, check):
+                return phases, hi
+        raise PlanningError(f"no brake within the limits from v={st.v:.6g}, a={st.a:.6g}")
+
+    def _brake_at(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
+                  limits: AxisLimits, g: float, shrink: float,
+                  fraction: float) -> tuple[Phases, int] | None:
+        """Brake phases under `limits` time-scaled by g (budgets times `shrink`) and the
+        number of cells they cover, or None if the start state does not fit. The cells
+        the brake runs over are found by fixed-point iteration (budgets -> length -> cells).
+        As in `_first_segment`, the acceleration budget stretches by 1 / margin to admit
+        the start acceleration (the brake is verified at the unmargined limits)."""
+        st = request.start
+        lim = _time_scaled(limits, g)
+        nb = BUDGET_FRACTIONS.size
+        feed = np.array([st.v])  # an upper bound of the brake's feed in each cell
+        for _ in range(16):
+            ncell = feed.size
+            sub = _first_cells(grid, ncell)
+            # each cell its own "segment" at its own feed bound, then the smallest budgets
+            b = segment_budgets(sub, np.arange(ncell + 1), feed, lim, self.shares)
+            A, J = float(np.min(b.A)), float(np.min(b.J)) * shrink
+            A = max(A * shrink, min(A, abs(st.a)))
+            if abs(st.a) > A and abs(st.a) <= A / self.margin:
+                A = abs(st.a)
+            fast = np.any(np.abs(sub.xs[:, :nb]) * feed[:, None, None] > lim.vmax)
+            if fast or abs(st.a) > A or not J > 0:
+                return None
+            target = min(float(np.min(vlim[:ncell])) * fraction, st.v)
+            phases = self._solver.feed_change(st.s, st.v, st.a, target, A, J)
+            if not phases.duration.size:
+                return None  # already there: nothing a brake could change
+            need = int(np.searchsorted(grid.edges, _end_state(phases).s, side="left"))
+            need = min(max(need, 1), grid.ncells)
+            actual = _cell_feed_bound(phases, grid, max(need, ncell))
+            grown = np.concatenate([feed, actual[ncell:]])
+            if need <= ncell and np.all(actual[:ncell] <= feed * (1 + 1e-9)):
+                return phases, ncell
+            feed = np.maximum(grown, actual)
+        return None
+
+    def _brake_fails(self, phases: Phases, grid: PathGrid, ncell: int,
+                     lim: AxisLimits) -> bool:
+        """True if some axis exceeds `lim` at a grid point the brake passes."""
+        s_end = _end_state(phases).s
+        sub = _first_cells(grid, ncell)
+        inside = sub.s <= s_end
+        v, a, j = (x.reshape(sub.s.shape)[:, :, None]
+                   for x in state_at_s(build_profile(phases), sub.s.ravel()))
+        vel = np.abs(sub.xs * v)
+        acc = np.abs(sub.xss * v * v + sub.xs * a)
+        jerk = np.abs(sub.xsss * v**3 + 3.0 * sub.xss * v * a + sub.xs * j)
+        bad = (vel > lim.vmax) | (acc > lim.amax) | (jerk > lim.jmax)
+        return bool(np.any(bad & inside[:, :, None]))
 
     # --- steps ------------------------------------------------------------------------
     def _result(self, profile: FeedProfile, t_start: float, info: dict) -> PlanResult:
@@ -235,6 +377,60 @@ def _forward_pass(w: np.ndarray, b: SegmentBudgets) -> None:
     """Lower junction feeds 2.. in place to what each segment can reach from the last."""
     for k in range(1, b.L.size):
         w[k + 1] = min(w[k + 1], reachable_feed(w[k], b.L[k] * _SLACK, b.A[k], b.J[k]))
+
+
+#: time scalings g of the limits tried for a brake, smallest first
+_BRAKE_SCALES = (1.0, *np.geomspace(1.05, 20.0, 40))
+#: fractions of the feed limit a brake aims at, tried in turn
+_BRAKE_TARGETS = (1.0, 0.7, 0.5, 0.3, 0.15, 0.05)
+#: budget shrink factors tried for a brake that fails verification
+_BRAKE_SHRINK = (1.0, 0.85, 0.7, 0.5)
+
+
+def _time_scaled(limits: AxisLimits, g: float) -> AxisLimits:
+    """Limits (v g, a g^2, j g^3): what the same motion needs when run g times faster."""
+    return AxisLimits(limits.vmax * g, limits.amax * g * g, limits.jmax * g**3)
+
+
+def _state_scale(request: PlanRequest, grid: PathGrid) -> float:
+    """The smallest time scaling g of the request's limits (v g, a g^2) that the start
+    state's axis velocity and acceleration fit in (at the grid's first point)."""
+    st = request.start
+    xs, xss = grid.xs[0, 0], grid.xss[0, 0]
+    lim = request.limits
+    g_v = np.max(np.abs(xs * st.v) / lim.vmax)
+    g_a = np.sqrt(np.max(np.abs(xss * st.v**2 + xs * st.a) / lim.amax))
+    return float(max(g_v, g_a))
+
+
+def _cell_feed_bound(phases: Phases, grid: PathGrid, ncell: int) -> np.ndarray:
+    """An upper bound of the feed of `phases` in each of the first `ncell` cells: the
+    larger of the feeds at the cell's ends, and the peak feed in the cells it lies in
+    (a brake's feed first rises while the start acceleration runs out, then falls)."""
+    profile = build_profile(phases)
+    at_edges = state_at_s(profile, grid.edges[:ncell + 1])[0]
+    bound = np.maximum(at_edges[:-1], at_edges[1:])
+    t = np.concatenate([[0.0], np.cumsum(phases.duration)])
+    s_v = profile.at(t)[:2]
+    where = np.clip(np.searchsorted(grid.edges, s_v[0], side="right") - 1, 0, ncell - 1)
+    np.maximum.at(bound, where, s_v[1])
+    return bound
+
+
+def _first_cells(grid: PathGrid, ncell: int) -> PathGrid:
+    """The grid cut to its first `ncell` cells."""
+    return replace(grid, edges=grid.edges[:ncell + 1], s=grid.s[:ncell], xs=grid.xs[:ncell],
+                   xss=grid.xss[:ncell], xsss=grid.xsss[:ncell],
+                   jerk_scale=grid.jerk_scale[:ncell], c1_cap=grid.c1_cap[:ncell],
+                   corner_after=grid.corner_after[:ncell])
+
+
+def _end_state(phases: Phases) -> PathState:
+    """Position, feed and acceleration at the end of the last phase."""
+    h, j, a, v, s = (float(x[-1]) for x in (phases.duration, phases.jerk, phases.acc,
+                                            phases.vel, phases.pos))
+    end_s = s + v * h + a * h * h / 2.0 + j * h**3 / 6.0
+    return PathState(end_s, max(v + a * h + j * h * h / 2.0, 0.0), a + j * h)
 
 
 def _rest_profile(s: float, dt: float) -> FeedProfile:

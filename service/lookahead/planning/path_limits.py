@@ -123,7 +123,7 @@ def build_grid(path: Path, s_begin: float, s_end: float, dt: float, limits: Axis
     knots = _inside(path.breakpoints_s(), s_begin, s_end, pad)
     caps = _inside(feed_cap.s_breaks, s_begin, s_end, pad) if feed_cap is not None else []
     nodes = np.unique(np.concatenate([[s_begin, s_end], corners, knots, caps]))
-    nodes_u = path.u_of_s(nodes)
+    nodes_u = _u_of_nodes(path, nodes)
     c1_s, c1_caps = np.empty(0), np.empty(0)
     if path.continuity() < 2:
         nodes, nodes_u, c1_s, c1_caps = _c1_knot_zones(path, nodes, nodes_u, knots, corners,
@@ -169,6 +169,22 @@ def build_grid(path: Path, s_begin: float, s_end: float, dt: float, limits: Axis
     if corners.size:
         corner_after[np.searchsorted(edges, corners - pad) - 1] = True
     return PathGrid(edges, s, xs, xss, xsss, jerk_scale, c1_cap, corner_after)
+
+
+def _u_of_nodes(path: Path, nodes: np.ndarray) -> np.ndarray:
+    """u at the node arc lengths: exact from the path's knots where a node is a knot
+    (paths with a `breakpoints_u` accessor), u_of_s for the rest (window ends, caps)."""
+    knots_u = getattr(path, "breakpoints_u", None)
+    if knots_u is None:
+        return path.u_of_s(nodes)
+    knots_s = path.breakpoints_s()
+    idx = np.clip(np.searchsorted(knots_s, nodes), 0, knots_s.size - 1)
+    is_knot = knots_s[idx] == nodes
+    u = np.empty_like(nodes)
+    u[is_knot] = knots_u()[idx[is_knot]]
+    if not np.all(is_knot):
+        u[~is_knot] = path.u_of_s(nodes[~is_knot])
+    return u
 
 
 def _c1_knot_zones(path: Path, nodes: np.ndarray, nodes_u: np.ndarray, knots: np.ndarray,

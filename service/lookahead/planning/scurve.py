@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from ruckig import InputParameter, Ruckig, RuckigError, Trajectory
+from ruckig import ControlInterface, InputParameter, Ruckig, RuckigError, Trajectory
 
 
 def transition_distance(v0: np.ndarray, v1: np.ndarray, A: np.ndarray,
@@ -112,6 +112,36 @@ class SCurveSolver:
         except RuckigError as exc:
             reason = str(exc).splitlines()[0] if str(exc) else "ruckig"
             raise SegmentInfeasibleError(reason) from None
+        return self._phases(s0, L, T, V)
+
+    def feed_change(self, s0: float, v0: float, a0: float, v1: float, A: float,
+                    J: float) -> Phases:
+        """Time-optimal feed change from (v0, a0) at s0 to (v1, 0), wherever it ends
+        (Ruckig's velocity interface); used to brake a start state that is above the
+        limits. Scaled so that feeds are near 1 (time unit A / J)."""
+        if not (A > 0 and J > 0 and v0 >= 0 and v1 >= 0):
+            raise SegmentInfeasibleError(f"bad feed change A={A} J={J} v0={v0} v1={v1}")
+        T = A / J
+        L = max(v0, v1, A * T) * T
+        inp = InputParameter(1)
+        inp.control_interface = ControlInterface.Velocity
+        inp.current_position = [0.0]
+        inp.current_velocity = [v0 * T / L]
+        inp.current_acceleration = [a0 * T * T / L]
+        inp.target_velocity = [v1 * T / L]
+        inp.target_acceleration = [0.0]
+        inp.max_velocity = [max(v0, v1) * T / L + 1.0]
+        inp.max_acceleration = [A * T * T / L]
+        inp.max_jerk = [J * T**3 / L]
+        try:
+            self._otg.calculate(inp, self._traj)
+        except RuckigError as exc:
+            raise SegmentInfeasibleError(str(exc).splitlines()[0] if str(exc) else "ruckig") \
+                from None
+        return self._phases(s0, L, T, max(v0, v1))
+
+    def _phases(self, s0: float, L: float, T: float, V: float) -> Phases:
+        """The last trajectory's phases (brake first), scaled back to path units."""
         prof = self._traj.profiles[0][0]
         rows = []
         brake = prof.brake
