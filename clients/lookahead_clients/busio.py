@@ -1,0 +1,106 @@
+"""Small zenoh helpers shared by the clients (imported inside `run()`: imports zenoh).
+
+Incoming samples are drained from a FifoChannel by a daemon thread into a `queue.Queue` as
+`Arrival(kind, t, key, payload)` items stamped with `time.monotonic()` on receipt; the
+thread ends when the session closes. Liveliness changes arrive on the same queue (kind
+"alive" or "gone"), so their order relative to data is kept.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from typing import NamedTuple
+
+import zenoh
+
+FIFO_CAPACITY = 8192
+
+
+class Arrival(NamedTuple):
+    """One received sample: kind 'put' | 'delete' | 'alive' | 'gone', monotonic time (s)."""
+
+    kind: str
+    t: float
+    key: str
+    payload: bytes
+
+
+def _kind(sample: zenoh.Sample, liveliness: bool) -> str:
+    put = sample.kind == zenoh.SampleKind.PUT
+    if liveliness:
+        return "alive" if put else "gone"
+    return "put" if put else "delete"
+
+
+#: poll interval of an empty channel (s)
+POLL_S = 0.002
+#: drain threads by the id of the session they read from
+_drains: dict[int, list[tuple[threading.Event, threading.Thread]]] = {}
+
+
+def drain(sub, out: queue.Queue, liveliness: bool = False, session=None) -> threading.Thread:
+    """Start a daemon thread moving the samples of a FifoChannel subscriber to `out`.
+
+    It polls `try_recv` instead of blocking in `recv`: a thread blocked in `recv` while the
+    session closes makes zenoh abort the process. `close_session(session)` stops the threads
+    registered for that session first."""
+    stop = threading.Event()
+
+    def loop() -> None:
+        try:
+            while not stop.is_set():
+                sample = sub.try_recv()
+                if sample is None:
+                    time.sleep(POLL_S)
+                    continue
+                out.put(Arrival(_kind(sample, liveliness), time.monotonic(),
+                                str(sample.key_expr), sample.payload.to_bytes()))
+        except zenoh.ZError:
+            return  # the session closed
+
+    thread = threading.Thread(target=loop, daemon=True, name=f"drain-{id(sub)}")
+    _drains.setdefault(id(session), []).append((stop, thread))
+    thread.start()
+    return thread
+
+
+def close_session(session) -> None:
+    """Stop the drain threads reading from `session`, then close it."""
+    for stop, thread in _drains.pop(id(session), []):
+        stop.set()
+        thread.join(timeout=1.0)
+    session.close()
+
+
+def subscribe(session, key_expr: str, out: queue.Queue):
+    """Subscribe `key_expr` into `out` (see module docstring); returns the subscriber."""
+    sub = session.declare_subscriber(key_expr, zenoh.handlers.FifoChannel(FIFO_CAPACITY))
+    drain(sub, out, session=session)
+    return sub
+
+
+def watch_liveliness(session, key_expr: str, out: queue.Queue):
+    """Liveliness tokens matching `key_expr` (current ones too) into `out` as alive/gone."""
+    sub = session.liveliness().declare_subscriber(
+        key_expr, zenoh.handlers.FifoChannel(256), history=True)
+    drain(sub, out, liveliness=True, session=session)
+    return sub
+
+
+def publisher(session, key_expr: str):
+    """A reliable publisher that blocks instead of dropping under congestion."""
+    return session.declare_publisher(key_expr, congestion_control=zenoh.CongestionControl.BLOCK)
+
+
+def wait_for_token(session, key_expr: str, timeout: float) -> bool:
+    """True once a liveliness token matching `key_expr` exists (waits up to `timeout` s)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        replies = session.liveliness().get(key_expr, timeout=0.5)
+        if any(r.ok is not None for r in replies):
+            return True
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(0.1)

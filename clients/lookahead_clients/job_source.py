@@ -1,0 +1,93 @@
+"""A job's point stream from a winding preset, a points file (CSV/.npy) or G-code, and its
+split into `points` segments (PROTOCOL.md: consecutive chunks of one stream, no repeated
+points between segments)."""
+
+from __future__ import annotations
+
+import itertools
+import re
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lookahead.protocol import Segment
+
+GCODE_SUFFIXES = (".gcode", ".nc", ".ngc", ".tap", ".g")
+
+
+@dataclass(frozen=True)
+class JobSource:
+    """Points (n, naxes) in machine axes; `feeds` (n,) path-speed caps (units/s, NaN =
+    none) or None; a one-line description."""
+
+    name: str
+    axes: list[str]
+    points: np.ndarray
+    feeds: np.ndarray | None
+    description: str
+
+
+def load_job(source: str, axes: list[str], circuits: int | str | None = None) -> JobSource:
+    """Resolve `source`: a preset name (`tube-1450`, `tube-9570`), else a file by suffix."""
+    from lookahead.geometry.winding import PRESETS, preset_points
+
+    if source in PRESETS:
+        preset_axes, points, info = preset_points(source, circuits)
+        if list(preset_axes) != list(axes):
+            raise ValueError(f"preset {source} has axes {preset_axes}, the machine {axes}")
+        return JobSource(source, list(axes), points, None, info.description)
+    path = Path(source)
+    if not path.is_file():
+        raise ValueError(f"{source}: neither a preset ({', '.join(PRESETS)}) nor a file")
+    if path.suffix.lower() in GCODE_SUFFIXES:
+        from lookahead.geometry.gcode import read_gcode
+
+        res = read_gcode(path.read_text(encoding="utf-8"), axes=axes)
+        return JobSource(path.stem, list(res.axes), res.points, res.feed,
+                         f"G-code {path.name}: {len(res.points)} points "
+                         f"({res.skipped} zero-length moves skipped)")
+    from lookahead.geometry.files import load_points_file
+
+    file_axes, points = load_points_file(path, axes)
+    return JobSource(path.stem, list(file_axes), points, None,
+                     f"points file {path.name}: {len(points)} points")
+
+
+def default_job_id(name: str) -> str:
+    """`<name>-<unix time in ms>`, reduced to the protocol's job-id alphabet."""
+    stem = re.sub(r"[^A-Za-z0-9_.-]", "_", name)[:40] or "job"
+    return f"{stem}-{int(time.time() * 1000)}"
+
+
+def _chunks(n: int, chunk: int, feeds: np.ndarray | None) -> list[tuple[int, int]]:
+    """[start, stop) point ranges of at most `chunk` points, also cut where the feed cap
+    changes (so each segment's cap is exact)."""
+    cuts = {0, n}
+    if feeds is not None and n > 1:
+        f = np.where(np.isnan(feeds), -1.0, feeds)
+        cuts.update(int(i) + 1 for i in np.flatnonzero(f[1:] != f[:-1]))
+    out = []
+    bounds = sorted(cuts)
+    for a, b in itertools.pairwise(bounds):
+        out.extend((s, min(s + chunk, b)) for s in range(a, b, chunk))
+    return out
+
+
+def make_segments(job: str, axes: list[str], points: np.ndarray, chunk: int = 500,
+                  fit: str = "cubic", feeds: np.ndarray | None = None,
+                  feed: float | None = None) -> list[Segment]:
+    """`points` segments of at most `chunk` points each. `feeds` (per point, NaN = none)
+    caps each segment's path speed; `feed` caps the whole job (the smaller cap wins)."""
+    if chunk < 1:
+        raise ValueError(f"chunk must be >= 1, got {chunk}")
+    pts = np.asarray(points, dtype=float)
+    ranges = _chunks(len(pts), chunk, feeds)
+    segments = []
+    for seq, (a, b) in enumerate(ranges):
+        caps = [c for c in (feed, None if feeds is None else float(feeds[a])) if c is not None
+                and np.isfinite(c)]
+        segments.append(Segment(job, seq, tuple(axes), "points", last=seq == len(ranges) - 1,
+                                points=pts[a:b], fit=fit, feed=min(caps) if caps else None))
+    return segments
