@@ -179,3 +179,20 @@ def test_osqp_backend_never_returns_an_unchecked_profile(path):
         assert "osqp" in str(err) or "limits" in str(err)
         return
     assert checker_ok(path, res.profile).violations == 0
+
+
+def test_reachable_q_matches_a_simulated_scurve_from_moving_states():
+    """The table + Newton inversion against a dense forward simulation (jerk J until the
+    acceleration is A, then A), including decelerating starts."""
+    rng = np.random.default_rng(3)
+    d = np.linspace(0.0, 300.0, 200)
+    t = np.linspace(0.0, 3.0, 300001)
+    for _ in range(20):
+        v0, a0, J, A = rng.uniform(50, 800), rng.uniform(-1500, 1900), rng.uniform(5e3, 2e4), 2e3
+        acc = np.minimum(a0 + J * t, A)
+        v = v0 + np.concatenate([[0.0], np.cumsum(0.5 * (acc[1:] + acc[:-1]) * np.diff(t))])
+        if v.min() < 0:
+            continue
+        s = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
+        np.testing.assert_allclose(np.sqrt(reachable_q(d, v0, a0, J, A)), np.interp(d, s, v),
+                                   atol=1e-4)

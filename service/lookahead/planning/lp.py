@@ -109,14 +109,20 @@ class LPPlanner:
         self,
         solver: str = "highs",
         grid_step: float | None = None,
-        max_passes: int = 2,
+        max_passes: int = 1,
         max_repairs: int = 8,
         margins: tuple[float, float, float] = (0.995, 0.98, 0.85),
         verify: bool = True,
         jerk_step: float = 0.3,
         check_step: float = 0.5,
         envelope_jerk: float = 0.7,
+        envelope_margin: float = 0.85,
+        zone_pad: int = 10,
+        free_start_nodes: int = 3,
     ) -> None:
+        self.free_start_nodes = free_start_nodes
+        self.envelope_margin = envelope_margin
+        self.zone_pad = zone_pad
         self.envelope_jerk = envelope_jerk
         self.check_step = check_step
         self.jerk_step = jerk_step
@@ -136,6 +142,7 @@ class LPPlanner:
         s, stop_idx = self.grid(request)
         geo = GridGeometry.sample(request.path, s)
         tight = Tightening.uniform(s.size, *self.margins)
+        self._pretighten(request, geo, tight, stop_idx)
         plan = self.solve_grid(request, geo, tight, stop_idx, fixed_head)
         repairs = 0
         worst = float("nan")
@@ -213,7 +220,12 @@ class LPPlanner:
         if q_star is None:
             q_star = self._solve(plan, weight, q_lo, q_hi, base, geo.n_nodes, record=False)
         q_floor = 1e-6 * float(np.max(q_hi))
-        rest = np.array([i for i, val in fixed.items() if val <= _REST**2], dtype=int)
+        rest = [i for i, val in fixed.items() if val <= _REST**2]
+        if request.start.v > _REST:
+            # the moving start's own jerk is whatever its previous plan had: the
+            # jerk-change regularizer there made replans from braking states infeasible
+            rest += list(range(self.free_start_nodes))
+        rest = np.unique(np.array(rest, dtype=int))
         best_q, best_t = None, np.inf
         for _ in range(passes or self.max_passes):
             rows = [*base, jerk_rows(geo, lim.jmax, tight.jerk, q_star, q_floor),
@@ -250,9 +262,9 @@ class LPPlanner:
         return vcap**2
 
     def _envelope(self, request: PlanRequest, geo: GridGeometry, tight: Tightening,
-                  stop_idx: np.ndarray) -> np.ndarray:
-        """Jerk-limited S-curve bounds on q after the start, before a rest end and around
-        interior stops (`lp_envelope`)."""
+                  stop_idx: np.ndarray, include_start: bool = True) -> np.ndarray:
+        """Jerk-limited S-curve bounds on q after the start (unless not `include_start`),
+        before a rest end and around interior stops (`lp_envelope`)."""
         A, J = path_limits(request.path, request.limits)
         s = geo.s
         # one S-curve per prescribed state, with the tightest factors of its reach
@@ -265,13 +277,36 @@ class LPPlanner:
                     A * float(np.min(tight.acc[near])))
 
         a0 = request.start.a
-        Jn, An = factors(s[0])
-        env = reachable_q(s - s[0], request.start.v, a0, Jn, max(An, a0 + 1e-6 * abs(a0)))
+        env = np.full(s.size, np.inf)
+        if include_start:
+            Jn, An = factors(s[0])
+            env = reachable_q(s - s[0], request.start.v, a0, Jn, max(An, a0 + 1e-6 * abs(a0)))
         if request.v_end <= _REST:
             env = np.minimum(env, reachable_q(s[-1] - s, 0.0, 0.0, *factors(s[-1])))
         for i in stop_idx:
             env = np.minimum(env, reachable_q(np.abs(s - s[i]), 0.0, 0.0, *factors(s[i])))
         return env
+
+    def _pretighten(self, request: PlanRequest, geo: GridGeometry, tight: Tightening,
+                    stop_idx: np.ndarray) -> None:
+        """Scale the jerk factor by `envelope_margin` where a start/stop envelope bounds
+        q (and a few nodes around it): where the envelope's straight q (constant path
+        acceleration) meets the velocity cap, the quintic reconstruction overshoots the
+        nodal jerk by ~15 % (measured), which otherwise costs a repair round per window.
+        Not after a moving start: there the committed state may need the full jerk (a
+        tighter row at the first nodes made replans infeasible)."""
+        if self.envelope_margin >= 1.0:
+            return
+        env = self._envelope(request, geo, tight, stop_idx,
+                             include_start=request.start.v <= _REST)
+        zone = env < self._caps(request, geo, tight)
+        if not np.any(zone):
+            return
+        grown = zone.copy()
+        for off in range(1, self.zone_pad + 1):
+            grown[off:] |= zone[:-off]
+            grown[:-off] |= zone[off:]
+        tight.jerk[grown] *= self.envelope_margin
 
     def _profile(self, request: PlanRequest, plan: GridPlan) -> FeedProfile:
         a_end = 0.0 if request.v_end <= _REST else None
