@@ -80,23 +80,55 @@ def test_duplicates_wrong_axes_and_late_segments_are_rejected():
     assert late[0].type == "rejected" and "finished" in late[0].extra["reason"]
 
 
-def test_gap_timeout_faults_until_reset():
+def test_gap_timeout_ends_the_job_at_what_it_has_then_the_next_job_runs():
     cfg = default_config()
     eng = Engine(cfg, make_planner("heuristic"))
     segs = _segments("g", _points(), 100)
     eng.submit(segs[0], now_s=0.0)
-    eng.submit(segs[2], now_s=0.0)
+    eng.submit(segs[1], now_s=0.0)
+    eng.submit(segs[3], now_s=0.0)  # seq 2 never comes
+    # the job starts after START_WAIT_S (too little geometry for the horizon), then moves
+    out = [b for b in (eng.next_batch() for _ in range(90)) if b is not None]
+    assert len(out) > 20 and np.linalg.norm(out[-1].vel[-1]) > 1.0  # gap not yet timed out
     assert eng.expire_gaps(1.0) == []
     events = eng.expire_gaps(cfg.service.gap_timeout_s + 1.0)
-    assert [e.type for e in events] == ["rejected", "fault", "job_finished"]
-    assert events[0].extra["seq"] == 1
-    assert eng.status().state == "fault"
-    other = _segments("next", _points(), 400)
-    eng.submit(other[0])
-    assert eng.next_batch() is None  # nothing runs in fault
-    assert eng.command(Command("reset")).ok
+    assert [e.type for e in events] == ["rejected", "fault"]
+    assert events[0].extra["seq"] == 2 and events[1].extra["reason"].startswith("seq")
+    assert eng.status().state == "fault"  # while the job runs out
+    out += _run(eng, {})
+    pos = np.vstack([b.pos for b in out])
+    # it came to rest at the end of the contiguous points it had, within the limits
+    np.testing.assert_allclose(pos[-1], segs[1].points[-1], atol=1e-6)
+    np.testing.assert_allclose(out[-1].vel[-1], 0.0, atol=1e-9)
+    assert check_positions(pos, cfg.machine.limits, cfg.machine.dt).ok
+    finished = [e for e in eng.drain_events() if e.type == "job_finished"]
+    assert finished[-1].extra.get("aborted") is True
+    late = eng.submit(segs[2])
+    assert late[0].type == "rejected" and "finished" in late[0].extra["reason"]
+    status = eng.status()
+    assert status.state == "idle" and status.error.startswith("seq")
+    # not latched: a job that starts where the machine is runs without a reset
+    nxt = _segments("next", np.vstack([pos[-1], pos[-1] + [50.0, 90.0]]), 10)
+    eng.submit(nxt[0])
     batches = _run(eng, {})
     assert batches[0].job == "next" and batches[-1].final
+    assert eng.status().error is None
+
+
+def test_gap_in_a_queued_job_drops_only_that_job():
+    cfg = default_config()
+    eng = Engine(cfg, make_planner("heuristic"))
+    pts = _points()
+    for seg in _segments("a", pts, 100):
+        eng.submit(seg, now_s=0.0)
+    eng.submit(Segment("q", 1, AXES, "points", True, points=pts[::-1][:5]), now_s=0.0)
+    first = eng.next_batch()
+    events = eng.expire_gaps(cfg.service.gap_timeout_s + 1.0)
+    assert [(e.type, e.job) for e in events] == [("rejected", "q"), ("fault", "q"),
+                                                 ("job_finished", "q")]
+    batches = [first, *_run(eng, {})]
+    assert {b.job for b in batches} == {"a"} and batches[-1].final
+    np.testing.assert_allclose(batches[-1].pos[-1], pts[-1], atol=1e-6)
 
 
 def test_curve_pieces_must_join():

@@ -5,6 +5,14 @@ calls the NS/cmd/* and NS/status queryables on its own threads (commands are han
 the main loop and answered once applied); the main loop (`run`, the caller's thread) owns
 the engine: it decodes segments, applies commands, publishes batches (real-time: paced by
 the wall clock, `lead_s` ahead of due time; fast: as fast as possible), events and status.
+
+What a client sees is consistent with the setpoints already published: in real-time mode
+the engine produces up to MAX_AHEAD_S ahead of publication, so events about motion
+(`job_started`, `starved`, `job_finished`) wait until the batch holding their sample k is
+published, and the status reports the last published sample (its `k`, `horizon_s` and a
+`running` job whose last batches are still buffered). The status answer (queryable) is
+refreshed whenever events are released, after commands, after segments are taken in and
+at status_hz.
 """
 
 from __future__ import annotations
@@ -14,7 +22,7 @@ import logging
 import queue
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import msgpack
@@ -27,9 +35,11 @@ from lookahead.protocol import (
     MAX_PAYLOAD_BYTES,
     Command,
     CommandReply,
+    Event,
     ProtocolError,
     Segment,
     SetpointBatch,
+    Status,
     key,
 )
 from lookahead.stream.engine import Engine
@@ -54,6 +64,8 @@ MAX_AHEAD_S = 1.0
 COMMAND_TIMEOUT_S = 5.0
 #: shutdown: longest wait for the stop to finish (s)
 SHUTDOWN_TIMEOUT_S = 30.0
+#: events published only once the samples they are about are published
+MOTION_EVENTS = ("job_started", "starved", "job_finished")
 
 
 @dataclass
@@ -102,6 +114,7 @@ class PlannerService:
         self._out_samples = 0
         self._max_compute_s = 0.0
         self._job_end_due: float | None = None
+        self._held: list[Event] = []  # events waiting for their samples to be published
 
     # --- bus ------------------------------------------------------------------------
     def open(self) -> None:
@@ -209,7 +222,7 @@ class PlannerService:
                 next_status = now + 1.0 / self.config.service.status_hz
             if not produced:
                 self._sleep(now, next_status)
-        self._publish_events()
+        self._publish_events(release_all=True)
         self._publish_status()
         log.info("stopped: %d segments, %d rejected, %d batches, %d samples, "
                  "%d replans (%d failed)", self.stats.segments, self.stats.rejected,
@@ -229,6 +242,7 @@ class PlannerService:
         except queue.Empty:
             return
         self._handle_payload(payload, time.monotonic())
+        self._status_payload = self._status().encode()
 
     def _stopping_done(self) -> bool:
         return self._shutdown.is_set() and self.engine.active_job is None
@@ -304,12 +318,16 @@ class PlannerService:
 
     # --- input ------------------------------------------------------------------------
     def _take_in(self, now: float) -> None:
+        taken = False
         while True:
             try:
                 payload = self._incoming.get_nowait()
             except queue.Empty:
-                return
+                break
             self._handle_payload(payload, now)
+            taken = True
+        if taken:  # `queued` changed
+            self._status_payload = self._status().encode()
 
     def _handle_payload(self, payload: bytes, now: float) -> None:
         if self.stats.first_segment_s is None:
@@ -341,7 +359,7 @@ class PlannerService:
             log.info("command %s%s -> %s", pending.command.verb,
                      "" if pending.command.value is None else f" {pending.command.value}",
                      "ok" if pending.reply.ok else pending.reply.error)
-            self._status_payload = self.engine.status().encode()
+            self._status_payload = self._status().encode()
             pending.done.set()
 
     # --- output -----------------------------------------------------------------------
@@ -355,12 +373,15 @@ class PlannerService:
             log.info("final batch job=%s seq=%d k=%d", batch.job, batch.seq,
                      batch.k0 + batch.n - 1)
 
-    def _publish_events(self) -> None:
-        events = self.engine.drain_events()
+    def _publish_events(self, release_all: bool = False) -> None:
+        self._held += self.engine.drain_events()
+        events = self._releasable()
+        if release_all:  # shutting down: nothing more will be published
+            events, self._held = events + self._held, []
         if events:
             # a client that sees an event and then asks for the status must not get an
             # answer older than the event
-            self._status_payload = self.engine.status().encode()
+            self._status_payload = self._status().encode()
         for event in events:
             if event.type == "rejected":
                 self.stats.rejected += 1
@@ -371,8 +392,39 @@ class PlannerService:
             log.log(level, "event %s job=%s k=%d %s", event.type, event.job, event.k, extra)
 
     def _publish_status(self) -> None:
-        self._status_payload = self.engine.status().encode()
+        self._status_payload = self._status().encode()
         self._pub_status.put(self._status_payload)
+
+    def _unpublished(self) -> list[SetpointBatch]:
+        with self._out_cv:
+            return list(self._out)
+
+    def _releasable(self) -> list[Event]:
+        """Held events that may be published now, in order; motion events stay (in order)
+        while a batch with a sample <= their k of their job is unpublished."""
+        if not self._held:
+            return []
+        out = self._unpublished()
+        ready, keep = [], []
+        for event in self._held:
+            waits = event.type in MOTION_EVENTS and (
+                bool(keep) or any(b.job == event.job and b.k0 <= event.k for b in out))
+            (keep if waits else ready).append(event)
+        self._held = keep
+        return ready
+
+    def _status(self) -> Status:
+        """The engine's status as of the last published sample (see the module docstring)."""
+        status = self.engine.status()
+        out = self._unpublished()
+        if not out:
+            return status
+        head = out[0]
+        ahead = sum(b.n for b in out if b.job == head.job) * self.config.machine.dt
+        if status.job == head.job and status.state != "idle":
+            return replace(status, k=max(head.k0 - 1, 0), horizon_s=status.horizon_s + ahead)
+        return replace(status, state="running", job=head.job, k=max(head.k0 - 1, 0),
+                       horizon_s=ahead, error=None)
 
 
 def peek_ids(payload: bytes) -> tuple[str | None, int | None]:

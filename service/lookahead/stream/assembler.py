@@ -82,6 +82,12 @@ class SegmentOrder:
         times = [t for _, t in self.pending.values() if t is not None]
         return bool(times) and now_s - min(times) > self.gap_timeout_s
 
+    def close(self) -> None:
+        """No more segments: the last one taken in (seq expected - 1) ends the job, and
+        waiting segments are dropped (a seq gap that timed out)."""
+        self.last_seq = self.expected - 1
+        self.pending.clear()
+
     @property
     def waiting(self) -> int:
         return len(self.pending)
@@ -109,6 +115,7 @@ class JobGeometry:
         self._fit_method = default_fit
         self._pieces: list[Path] = []  # curve pieces, or frozen point fits
         self._composite: Path | None = None
+        self._curve_length = 0.0
         # points: (index of the fit the segment ended in, chord u in that fit at its end)
         self._u_ends: list[tuple[int, float]] = []
         self._chord = 0.0  # chord length since the current fit's first point
@@ -136,9 +143,15 @@ class JobGeometry:
         self.nsegments += 1
         self._feeds.append(seg.feed)
         if seg.last:
-            self.finished = True
-            if self._fit is not None and self._fit.npoints >= 2:
-                self._fit.finish()
+            self.truncate()
+
+    def truncate(self) -> None:
+        """End the job at what has been received: the `last` segment, or a seq gap that
+        timed out. The path up to the end of what was received becomes final."""
+        self.finished = True
+        if self._fit is not None and self._fit.npoints >= 2:
+            self._fit.finish()
+            self._cached = None
 
     def _add_points(self, seg: Segment) -> None:
         assert seg.points is not None
@@ -198,18 +211,20 @@ class JobGeometry:
         else:
             self.first_point = start.copy()
             lo, hi = np.minimum(start, end), np.maximum(start, end)
-        try:
-            composite = CompositePath([*self._pieces, piece], join_tol=JOIN_TOL)
-        except ValueError as exc:
-            raise SegmentRejectedError(seg.seq, f"ctrl: {exc}") from None
+        # the composite is built lazily in path(): CompositePath evaluates every piece's
+        # ends when built, so building it per piece costs O(pieces^2) over a job
         self._pieces.append(piece)
-        self._composite = composite
+        self._composite = None
+        self._curve_length += piece.length
         self._lo, self._hi = lo, hi
         self._last_point = end.copy()
 
     # --- output ---------------------------------------------------------------------
     def path(self) -> Path | None:
         if self.kind == "curve":
+            if self._composite is None:  # pieces are checked to join in _add_piece
+                self._composite = (self._pieces[0] if len(self._pieces) == 1
+                                   else CompositePath(self._pieces, join_tol=JOIN_TOL))
             return self._composite
         live = self._fit.path() if self._fit is not None and self._fit.npoints >= 2 else None
         if not self._pieces:
@@ -223,7 +238,7 @@ class JobGeometry:
     def final_length(self) -> float:
         """Arc length up to which the geometry never changes again."""
         if self.kind == "curve":
-            return self._composite.length if self._composite is not None else 0.0
+            return self._curve_length
         done = float(sum(p.length for p in self._pieces))
         if self._fit is None or self._fit.npoints < 2:
             return done

@@ -11,7 +11,8 @@ API (stable; the replay client depends on it):
 - `submit(segment, now_s=None) -> list[Event]`: take in a decoded segment. Segments are
   recorded and listed in the next batch's `applied` field (the sample index k0 at which
   they were taken in). `now_s` (any monotonic clock, seconds) only times seq gaps.
-- `expire_gaps(now_s) -> list[Event]`: fault jobs whose missing seq waited too long.
+- `expire_gaps(now_s) -> list[Event]`: fault jobs whose missing seq waited too long
+  (see "Faults" below).
 - `reject(reason, job=None, seq=None) -> Event`: a `rejected` event for a payload that did
   not decode (the service's decode errors).
 - `next_batch() -> SetpointBatch | None`: the next batch of the active job; None when idle,
@@ -28,8 +29,29 @@ Replay: for each recorded batch, submit the segments named in its `applied` list
 Planning (DESIGN.md "Look-ahead window"): every plan starts in the state of the last
 published sample (s, ds/dt, d2s/dt2 continuous) and ends at rest inside final geometry, at
 min(final length, s + horizon); every plan is checked with the finite-difference checker
-against the published tail before it is committed, and the previous plan (which also ends
-at rest) stays in force if a replan fails.
+against the published tail before it is committed. If the configured planner fails, the
+stop planner (heuristic) gets the same request (`fallbacks` counts these); if both fail,
+the previous plan (which also ends at rest) stays in force.
+
+Where the machine is: the last published sample. A job must start there: when a job is
+about to start, its first point is compared with the machine position (per axis, within
+START_TOL axis units); a job that starts elsewhere is rejected (`rejected` with seq 0 and
+`job_finished` with `aborted: true`, nothing moves), since the service has no move of its
+own to get there. The first job after start-up has no known position and is accepted.
+
+Faults:
+- A seq gap that outlasts gap_timeout_s (or too many segments waiting behind one) is the
+  job's fault, not the machine's: `rejected` (the missing seq) and `fault` events; a job
+  that is running ends at the end of the contiguous geometry it has (its window already
+  ends at rest there, so this is a normal in-limit stop, not an emergency one), then
+  `job_finished` with `aborted: true`; a job that has not started is dropped. The fault
+  does not latch: the machine is at rest at a known position, and the next job runs only
+  if it starts exactly there (the start check above), so continuing is safe. Status shows
+  `fault` while the job runs out and keeps the reason in `error` until the next job
+  starts or a `reset`.
+- Anything else (no plan from a job's start, an internal error) latches: the active job
+  stops along the path within the limits, status stays `fault` and no job starts until
+  `reset`.
 """
 
 from __future__ import annotations
@@ -71,6 +93,9 @@ START_WAIT_S = 0.5
 TRANSITION_RETRY_S = 0.03
 #: job ids remembered as finished (later segments of them are rejected)
 MAX_DONE = 4096
+#: a job's first point may differ from the machine position by this much per axis (axis
+#: units; the end of a path is sampled to ~1e-12, so this only absorbs rounding)
+START_TOL = 1e-6
 
 
 @dataclass
@@ -124,7 +149,7 @@ class Engine:
         self._start_wait = max(1, round(START_WAIT_S / self.dt))
         self._retry = max(1, round(TRANSITION_RETRY_S / self.dt))
         self._jobs: OrderedDict[str, _Job] = OrderedDict()
-        self._done: OrderedDict[str, None] = OrderedDict()
+        self._done: OrderedDict[str, str] = OrderedDict()  # job id -> "finished" / ...
         self._active: _Job | None = None
         self._events: list[Event] = []
         self._applied: list[tuple[str, int]] = []
@@ -133,8 +158,11 @@ class Engine:
         self.plan_ms = 0.0
         self.replans = 0
         self.replan_failures = 0
+        self.fallbacks = 0
         self._last_k = 0
         self._last_job: str | None = None
+        self._position: np.ndarray | None = None  # last published sample, None at start-up
+        self._job_error: str | None = None  # a job-scoped fault, shown until the next job
 
     # --- input ------------------------------------------------------------------------
     def submit(self, seg: Segment, now_s: float | None = None) -> list[Event]:
@@ -146,7 +174,7 @@ class Engine:
                          f"{list(self.axes)}, got {list(seg.axes)}")
             return self._events[mark:]
         if seg.job in self._done:
-            self._reject(seg.job, seg.seq, f"job: {seg.job!r} has already finished")
+            self._reject(seg.job, seg.seq, f"job: {seg.job!r} {self._done[seg.job]}")
             return self._events[mark:]
         job = self._jobs.get(seg.job)
         if job is None:
@@ -160,7 +188,7 @@ class Engine:
             ready = []
         except JobFaultError as exc:
             self._jobs.setdefault(job.id, job)
-            self._fault_job(job, str(exc))
+            self._seq_fault(job, str(exc))
             return self._events[mark:]
         while ready:
             nxt = ready.pop()
@@ -179,7 +207,7 @@ class Engine:
         mark = len(self._events)
         for job in list(self._jobs.values()):
             if job.fault is None and job.order.overdue(now_s):
-                self._fault_job(job, f"seq: segment {job.order.expected} of job {job.id!r} "
+                self._seq_fault(job, f"seq: segment {job.order.expected} of job {job.id!r} "
                                 f"did not arrive within {job.order.gap_timeout_s} s")
         return self._events[mark:]
 
@@ -198,14 +226,31 @@ class Engine:
             if self.fault is not None or not self._jobs:
                 return None
             job = next(iter(self._jobs.values()))
+            if job.geo.first_point is not None and self._reject_elsewhere(job):
+                return None
             if not self._ready_to_start(job):
                 return None
             if job.geo.empty:
                 return self._empty_job(job)
             self._active = job
             job.started = True
+            self._job_error = None
             self._emit("job_started", job.id, 0)
         return self._produce(self._active)
+
+    def _reject_elsewhere(self, job: _Job) -> bool:
+        """Reject (and drop) a job about to start whose first point is not where the
+        machine is; True if it was rejected."""
+        first, here = job.geo.first_point, self._position
+        if here is None or np.all(np.abs(first - here) <= START_TOL):
+            return False
+        field_name = "points[0]" if job.geo.kind == "points" else "ctrl[0]"
+        self._reject(job.id, 0, f"{field_name}: job {job.id!r} starts at "
+                     f"{_fmt(first)} {list(self.axes)} but the machine is at {_fmt(here)} "
+                     f"(where the last job left it); a job must start where the machine is")
+        self._emit("job_finished", job.id, 0, duration_s=0.0, aborted=True)
+        self._drop(job, "was rejected (it does not start where the machine is)")
+        return True
 
     def _ready_to_start(self, job: _Job) -> bool:
         geo = job.geo
@@ -225,6 +270,8 @@ class Engine:
         zeros = np.zeros((1, len(self.axes)))
         batch = SetpointBatch(job.id, 0, 0, self.dt, self.axes, point.reshape(1, -1), zeros,
                               zeros.copy(), True, applied=self._take_applied())
+        self._position = point.copy()
+        self._last_k, self._last_job, self._job_error = 0, job.id, None
         self._emit("job_started", job.id, 0)
         self._finish(job, aborted=False)
         return batch
@@ -248,9 +295,10 @@ class Engine:
         job.k += n
         job.batch_seq += 1
         job.tail = np.vstack([job.tail, smp.pos])[-3:]
+        self._position = smp.pos[-1].copy()
         self._last_k, self._last_job = job.k - 1, job.id
         if final:
-            self._finish(job, aborted=job.stop in ("abort", "fault"))
+            self._finish(job, aborted=job.stop in ("abort", "fault") or job.fault is not None)
         elif (job.k - 1 >= plan.k_end and not job.hold and not job.starved
               and self._at_sent_end(job)):
             job.starved = True
@@ -296,7 +344,7 @@ class Engine:
         """Plan [start.s, s_end] anchored at k_plan; keep the old plan if it fails."""
         request = self._request(job, start, s_end)
         try:
-            plan = plan_checked(self.planner, request, k_plan, job.tail, self.limits)
+            plan = self._plan_with_fallback(request, k_plan, job.tail)
         except (PlanningError, ValueError, RuntimeError, ArithmeticError) as exc:
             self.replan_failures += 1
             job.last_fail = k_plan
@@ -310,6 +358,20 @@ class Engine:
         self.replans += 1
         self.plan_ms = plan.compute_s * 1e3
         return True
+
+    def _plan_with_fallback(self, request: PlanRequest, k_plan: int, tail: np.ndarray
+                            ) -> CommittedPlan:
+        """The configured planner's checked plan, else the stop planner's (same request)."""
+        try:
+            return plan_checked(self.planner, request, k_plan, tail, self.limits)
+        except (PlanningError, ValueError, RuntimeError, ArithmeticError) as exc:
+            if self.stop_planner is self.planner:
+                raise
+            log.info("%s failed at k=%d (%s); falling back to %s", self.planner.name, k_plan,
+                     exc, self.stop_planner.name)
+        plan = plan_checked(self.stop_planner, request, k_plan, tail, self.limits)
+        self.fallbacks += 1
+        return plan
 
     def _maybe_replan(self, job: _Job) -> None:
         geo = job.geo
@@ -415,6 +477,7 @@ class Engine:
             return CommandReply(True)
         if cmd.verb == "reset":
             self.fault = None
+            self._job_error = None
             return CommandReply(True)
         if cmd.verb == "hold":
             if job is None:
@@ -469,7 +532,7 @@ class Engine:
             queued = sum(j.geo.nsegments + j.order.waiting for j in self._jobs.values())
             head = next(iter(self._jobs), None)
             return Status(state, head or self._last_job, self._last_k, queued, 0.0,
-                          self.override, name, self.plan_ms, self.fault)
+                          self.override, name, self.plan_ms, self.fault or self._job_error)
         if self.fault or job.fault:
             state = "fault"
         elif job.hold:
@@ -507,11 +570,25 @@ class Engine:
         k = self._active.k - 1 if self._active is not None and job == self._active.id else 0
         return self._emit("rejected", job, max(k, 0), seq=seq, reason=reason)
 
-    def _fault_job(self, job: _Job, reason: str) -> None:
+    def _seq_fault(self, job: _Job, reason: str) -> None:
+        """A seq gap that timed out: the job ends at the end of what it has (see the
+        module docstring, "Faults"); not latched."""
         log.error("fault job=%s: %s", job.id, reason)
         k = max(job.k - 1, 0)
-        if reason.startswith("seq:"):
-            self._emit("rejected", job.id, k, seq=job.order.expected, reason=reason)
+        self._emit("rejected", job.id, k, seq=job.order.expected, reason=reason)
+        self._emit("fault", job.id, k, reason=reason)
+        job.fault = self._job_error = reason
+        job.order.close()
+        if job is self._active:
+            job.geo.truncate()
+        else:
+            self._emit("job_finished", job.id, 0, duration_s=0.0, aborted=True)
+            self._drop(job)
+
+    def _fault_job(self, job: _Job, reason: str) -> None:
+        """A latched fault: the active job stops along the path, a queued one is dropped."""
+        log.error("fault job=%s: %s", job.id, reason)
+        k = max(job.k - 1, 0)
         self._emit("fault", job.id, k, reason=reason)
         self.fault = reason
         job.fault = reason
@@ -528,13 +605,17 @@ class Engine:
                    duration_s=max(job.k - 1, 0) * self.dt, **extra)
         self._drop(job)
 
-    def _drop(self, job: _Job) -> None:
+    def _drop(self, job: _Job, outcome: str = "has already finished") -> None:
         self._jobs.pop(job.id, None)
-        self._done[job.id] = None
+        self._done[job.id] = outcome
         while len(self._done) > MAX_DONE:
             self._done.popitem(last=False)
         if self._active is job:
             self._active = None
+
+
+def _fmt(point: np.ndarray) -> str:
+    return "[" + ", ".join(f"{x:.9g}" for x in point) + "]"
 
 
 def horizon_length(limits: AxisLimits, path_scale: np.ndarray, horizon_s: float) -> float:
