@@ -12,21 +12,29 @@ nodes are tightened and one jerk pass is solved again (the repair loop).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.interpolate import PPoly
 
 from lookahead.geometry.base import Path
 from lookahead.limits import AxisLimits
 from lookahead.planning.base import FeedProfile, PlanningError, PlanRequest, PlanResult
-from lookahead.planning.grid_profile import grid_time, profile_from_grid
+from lookahead.planning.grid_profile import (
+    grid_time,
+    join_profiles,
+    node_accelerations,
+    profile_from,
+    profile_from_grid,
+)
 from lookahead.planning.lp_envelope import braking_distance, path_limits, reachable_q
-from lookahead.planning.lp_grid import build_grid
+from lookahead.planning.lp_grid import build_grid, extend_grid
 from lookahead.planning.lp_rows import (
     GridGeometry,
     Rows,
     acceleration_rows,
     end_acceleration_rows,
+    free_rows,
     jerk_change_rows,
     jerk_rows,
     start_slope_row,
@@ -61,6 +69,39 @@ class GridPlan:
     pass_times: list[float] = field(default_factory=list)
     solver_ms: list[float] = field(default_factory=list)
     statuses: list[str] = field(default_factory=list)
+
+
+@dataclass
+class LastPlan:
+    """The planner's last plan, kept for replans that start on it: the request, the grid
+    geometry (from the node at or before its start), q, the node accelerations its profile
+    used, the final tightening, the interior rest nodes and the profile before it was cut
+    at the start (time 0 at geo.s[0])."""
+
+    request: PlanRequest
+    geo: GridGeometry
+    q: np.ndarray
+    a: np.ndarray
+    tight: Tightening
+    stop_idx: np.ndarray
+    profile: FeedProfile
+
+
+@dataclass
+class Seam:
+    """How a replan joins the last plan: its nodes 0..n_reuse-1 are the last plan's nodes
+    first..first+n_reuse-1 (geometry, tightening and jerk linearization point reused), of
+    which the first `FIXED_NODES` keep their q, so the first interval (cut at `t_cut`, s
+    into it) is exactly the last plan's: velocity, acceleration and jerk continue."""
+
+    last: LastPlan
+    first: int
+    n_reuse: int
+    t_cut: float
+
+
+#: q fixed at a seam: velocity, acceleration and jerk of the first interval (DESIGN.md)
+FIXED_NODES = 3
 
 
 def default_grid_step(path: Path, limits: AxisLimits, interval_s: float = 0.0045) -> float:
@@ -101,6 +142,11 @@ class LPPlanner:
     regularizer). check_step: spacing of the analytic verification, in units of the
     request's dt. envelope_jerk: factor on the path jerk of the start/stop S-curve
     envelopes (the reconstruction overshoots most on the graded grid near rest).
+    reuse: continue the last plan when a request starts on it (`Seam`, `plan`).
+    seam_va_pass: at a seam, solve the velocity+acceleration LP for the jerk rows'
+    linearization point beyond the reused nodes (default: the upper bounds there; the same
+    times and failures measured, 2-4 ms less). seam_jerk_change: keep the jerk-change rows
+    at a seam's first nodes (its head satisfies them).
     """
 
     name = "lp"
@@ -119,7 +165,15 @@ class LPPlanner:
         envelope_margin: float = 0.85,
         zone_pad: int = 10,
         free_start_nodes: int = 3,
+        reuse: bool = True,
+        seam_va_pass: bool = False,
+        seam_jerk_change: bool = True,
     ) -> None:
+        self.reuse = reuse
+        self.seam_va_pass = seam_va_pass
+        self.seam_jerk_change = seam_jerk_change
+        self._last: LastPlan | None = None
+        self._corners: tuple[Path, np.ndarray] | None = None
         self.free_start_nodes = free_start_nodes
         self.envelope_margin = envelope_margin
         self.zone_pad = zone_pad
@@ -137,21 +191,143 @@ class LPPlanner:
     # --- public -----------------------------------------------------------------------
     def plan(self, request: PlanRequest, fixed_head: np.ndarray | None = None) -> PlanResult:
         """Plan [start.s, s_end]. fixed_head: q values to impose on the first nodes
-        (the windowed driver passes the committed nodes of the previous window)."""
+        (the windowed driver passes the committed nodes of the previous window).
+
+        A request that starts on this planner's last plan (same path object and limits,
+        the state at start.s equal to the plan's to rounding: the service's replans)
+        continues it (`Seam`): first keeping the last plan up to one braking distance
+        before the nearer window end and solving only the rest (`_plan_frozen`, as the
+        windowed LP commits), then keeping half of that, then re-solving all but the
+        seam's first interval; if all fail, the request is planned from scratch."""
         t0 = time.perf_counter()
-        s, stop_idx = self.grid(request)
-        geo = GridGeometry.sample(request.path, s)
-        tight = Tightening.uniform(s.size, *self.margins)
-        self._pretighten(request, geo, tight, stop_idx)
-        plan = self.solve_grid(request, geo, tight, stop_idx, fixed_head)
+        seam = self.find_seam(request) if fixed_head is None and self.reuse else None
+        result = None
+        if seam is not None:
+            last = self._last
+            for attempt in (self._plan_frozen, self._plan_half_frozen, self._plan_seam):
+                try:
+                    result = attempt(request, seam)
+                    break
+                except PlanningError:
+                    self._last = last
+        if result is None:
+            result = self._plan(request, fixed_head, None)
+        return PlanResult(result.profile, self.name, time.perf_counter() - t0, result.info)
+
+    def _plan_seam(self, request: PlanRequest, seam: Seam) -> PlanResult:
+        return self._plan(request, None, seam)
+
+    def _plan_half_frozen(self, request: PlanRequest, seam: Seam) -> PlanResult:
+        return self._plan_frozen(request, seam, back=(seam.n_reuse - FIXED_NODES) // 2)
+
+    def _plan_frozen(self, request: PlanRequest, seam: Seam, back: int = 0) -> PlanResult:
+        """The last plan kept from the seam up to its node first + n_reuse - FIXED_NODES
+        - back, then a plan from there (a seam at that node, its first interval exact):
+        only the new part is solved and verified."""
+        last = seam.last
+        i = seam.first
+        j0 = i + seam.n_reuse - FIXED_NODES - back
+        if j0 <= i or i + seam.n_reuse == last.geo.n_nodes:
+            return self._plan(request, None, seam)
+        sub = self._plan(request, None, Seam(last, j0, FIXED_NODES, 0.0))
+        tail = self._last
+        assert tail is not None
+        pp = last.profile.s_of_t
+        full = join_profiles(FeedProfile(PPoly(pp.c[:, i:j0], pp.x[i:j0 + 1], extrapolate=False)),
+                             tail.profile)
+        kept = slice(i, j0)
+        old_stops = last.stop_idx[(last.stop_idx > i) & (last.stop_idx < j0)] - i
+        self._last = LastPlan(
+            request, GridGeometry.join(last.geo.take(kept), tail.geo),
+            np.concatenate([last.q[kept], tail.q]), np.concatenate([last.a[kept], tail.a]),
+            Tightening(*(np.concatenate([getattr(last.tight, f)[kept], getattr(tail.tight, f)])
+                         for f in ("vel", "acc", "jerk"))),
+            np.concatenate([old_stops, tail.stop_idx + (j0 - i)]).astype(int), full)
+        info = dict(sub.info)
+        info["seam"] = {"reused_nodes": seam.n_reuse, "t_cut": seam.t_cut, "frozen": j0 - i}
+        info["grid_s"], info["grid_q"] = self._last.geo.s, self._last.q
+        return PlanResult(profile_from(full, seam.t_cut), self.name, 0.0, info)
+
+    def forget(self) -> None:
+        """Drop the last plan (the next request is planned from scratch)."""
+        self._last = None
+
+    def find_seam(self, request: PlanRequest) -> Seam | None:
+        """The seam with the last plan if the request starts on it (moving), else None."""
+        last = self._last
+        start = request.start
+        if last is None or start.v <= _REST:
+            return None
+        old = last.request
+        if (request.path is not old.path or request.dt != old.dt
+                or not _same_limits(request.limits, old.limits)):
+            return None
+        s = last.geo.s
+        i = int(np.searchsorted(s, start.s, side="right")) - 1
+        if i < 0 or i >= s.size - 1:
+            return None
+        t_cut = _time_at(last.profile, i, start.s)
+        if t_cut is None:
+            return None
+        _, v, a, _ = last.profile.at(np.array([t_cut]))[:, 0]
+        t_cut -= float(last.profile.s_of_t.x[i] - last.profile.s_of_t.x[0])
+        v_scale = float(np.sqrt(np.max(last.q)))
+        a_scale = float(np.max(np.abs(last.a)))
+        if (abs(v - start.v) > 1e-7 * (1.0 + v_scale)
+                or abs(a - start.a) > 1e-7 * (1.0 + a_scale)):
+            return None
+        if (abs(request.s_end - old.s_end) <= 1e-12 * max(abs(old.s_end), 1.0)
+                and request.v_end == old.v_end):
+            # the same end: the rest of the last plan is a solution, keep all its nodes
+            n_reuse = s.size - i
+        else:
+            # reuse nodes up to one top-feed braking distance before the nearer window end
+            # (there the last plan was already slowing down for its stop)
+            reach = self._reach(request, last.geo)
+            k = int(np.searchsorted(s, min(old.s_end, request.s_end) - reach, side="right")) - 1
+            n_reuse = max(k - i + 1, FIXED_NODES)
+            if i + n_reuse >= s.size or s[i + n_reuse - 1] >= request.s_end:
+                return None
+        if request.feed_cap is not None or old.feed_cap is not None:
+            nodes = s[i:i + n_reuse]
+            if (request.feed_cap is None or old.feed_cap is None
+                    or not np.array_equal(request.feed_cap.at(nodes), old.feed_cap.at(nodes))):
+                return None
+        return Seam(last, i, n_reuse, t_cut)
+
+    def _plan(self, request: PlanRequest, fixed_head: np.ndarray | None,
+              seam: Seam | None) -> PlanResult:
+        """One plan: the grid (fresh, or continuing the seam's), the LP, the check/repair
+        loop. Remembers the result as the last plan. A seam with the last plan's end is
+        the rest of the last plan (verified already): no LP."""
+        if seam is not None and seam.first + seam.n_reuse == seam.last.geo.n_nodes:
+            return self._rest_of_last(seam)
+        if seam is None:
+            s, stop_idx = self.grid(request)
+            geo = self.geometry(request.path, s)
+            tight = Tightening.uniform(s.size, *self.margins)
+            self._pretighten(request, geo, tight, stop_idx)
+            head, q_star_head, a_start, t_cut = fixed_head, None, request.start.a, 0.0
+        else:
+            geo, stop_idx, tight = self._seam_grid(request, seam)
+            s = geo.s
+            head = seam.last.q[seam.first:seam.first + min(FIXED_NODES, seam.n_reuse)]
+            q_star_head = self._seam_linearization(request, seam, s)
+            a_start, t_cut = float(seam.last.a[seam.first]), seam.t_cut
+        plan = self.solve_grid(request, geo, tight, stop_idx, head, start_envelope=seam is None,
+                               q_star_head=q_star_head)
         repairs = 0
         worst = float("nan")
         while True:
-            profile = self._profile(request, plan)
+            full = self._profile(request, plan, a_start)
+            profile = profile_from(full, t_cut) if t_cut > 0.0 else full
             if not self.verify:
                 break
             ratios = analytic_ratios(request.path, profile, request.limits, geo,
                                      self.check_step * request.dt)
+            if t_cut > 0.0:  # times on the un-cut profile, whose pieces are the intervals
+                ratios = replace(ratios, t_vel=ratios.t_vel + t_cut,
+                                 t_acc=ratios.t_acc + t_cut, t_jerk=ratios.t_jerk + t_cut)
             worst = ratios.worst
             if worst <= 1.0:
                 break
@@ -160,13 +336,18 @@ class LPPlanner:
                     f"lp: sampled profile still exceeds the limits by {100 * (worst - 1):.1f} %"
                     f" after {repairs} repairs"
                 )
-            self._tighten(tight, ratios, profile, s, request.dt)
-            plan = self.solve_grid(request, geo, tight, stop_idx, fixed_head, start_q=plan.q,
-                                   passes=1)
+            self._tighten(tight, ratios, full, s, request.dt)
+            plan = self.solve_grid(request, geo, tight, stop_idx, head, start_q=plan.q,
+                                   passes=1, start_envelope=seam is None)
             repairs += 1
+        a_end = 0.0 if request.v_end <= _REST else None
+        self._last = LastPlan(request, geo, plan.q, node_accelerations(s, plan.q, a_start, a_end),
+                              tight, stop_idx, full)
         info = {
             "solver": self.solver,
             "nodes": int(s.size),
+            "seam": None if seam is None else {"reused_nodes": seam.n_reuse,
+                                               "t_cut": seam.t_cut},
             "pass_times_s": plan.pass_times,
             "solver_ms": plan.solver_ms,
             "statuses": plan.statuses,
@@ -175,7 +356,67 @@ class LPPlanner:
             "grid_s": s,
             "grid_q": plan.q,
         }
-        return PlanResult(profile, self.name, time.perf_counter() - t0, info)
+        return PlanResult(profile, self.name, 0.0, info)
+
+    @staticmethod
+    def _rest_of_last(seam: Seam) -> PlanResult:
+        last = seam.last
+        x = last.profile.s_of_t.x
+        profile = profile_from(last.profile, float(x[seam.first] - x[0]) + seam.t_cut)
+        info = {"seam": {"reused_nodes": seam.n_reuse, "t_cut": seam.t_cut, "solved": False},
+                "nodes": seam.n_reuse, "repairs": 0, "grid_s": last.geo.s[seam.first:],
+                "grid_q": last.q[seam.first:]}
+        return PlanResult(profile, "lp", 0.0, info)
+
+    def _seam_linearization(self, request: PlanRequest, seam: Seam, s: np.ndarray
+                            ) -> np.ndarray:
+        """The jerk rows' linearization point on the first nodes of a seam's grid: the
+        last plan's q on the reused nodes and, on fresh nodes up to where the last plan
+        began braking for its window end, its q interpolated (tangents at the solution
+        being continued keep it feasible; at the upper bounds, continuing a hard
+        acceleration from the seam was infeasible)."""
+        last = seam.last
+        q = last.q[seam.first:seam.first + seam.n_reuse]
+        A, J = path_limits(request.path, request.limits)
+        brake = braking_distance(float(np.sqrt(np.max(last.q))), A * self.margins[1],
+                                 J * self.envelope_jerk * self.margins[2] * self.envelope_margin)
+        fresh = s[seam.n_reuse:]
+        fresh = fresh[fresh <= last.request.s_end - brake]
+        return np.concatenate([q, np.interp(fresh, last.geo.s, last.q)])
+
+    def corners(self, path: Path) -> np.ndarray:
+        """path.corners_s(), cached for the last path object (a replan's path)."""
+        if self._corners is None or self._corners[0] is not path:
+            self._corners = (path, np.asarray(path.corners_s(), dtype=float))
+        return self._corners[1]
+
+    def geometry(self, path: Path, s: np.ndarray) -> GridGeometry:
+        """Path derivatives at the nodes s (`GridGeometry.sample`)."""
+        return GridGeometry.sample(path, s)
+
+    def _seam_grid(self, request: PlanRequest, seam: Seam
+                   ) -> tuple[GridGeometry, np.ndarray, Tightening]:
+        """The seam's reused nodes, then fresh ones to s_end; the reused nodes keep their
+        geometry and tightening, the fresh ones get the margins and the stop pretightening."""
+        last = seam.last
+        reused = slice(seam.first, seam.first + seam.n_reuse)
+        old_stops = last.stop_idx[(last.stop_idx > seam.first)
+                                  & (last.stop_idx < seam.first + seam.n_reuse)] - seam.first
+        h = self.grid_step or default_grid_step(request.path, request.limits)
+        corners = self.corners(request.path)
+        if seam.first + seam.n_reuse == last.geo.n_nodes:  # the same end: no fresh nodes
+            geo, stop_idx = last.geo.take(reused), old_stops
+        else:
+            s, stop_idx = extend_grid(last.geo.s[reused], float(request.s_end), h,
+                                      request.v_end <= _REST, corners, old_stops)
+            geo = GridGeometry.join(last.geo.take(reused),
+                                    self.geometry(request.path, s[seam.n_reuse:]))
+        tight = Tightening.uniform(geo.n_nodes, *self.margins)
+        for mine, theirs in ((tight.vel, last.tight.vel), (tight.acc, last.tight.acc),
+                             (tight.jerk, last.tight.jerk)):
+            mine[:seam.n_reuse] = theirs[reused]
+        self._pretighten(request, geo, tight, stop_idx, first_free=seam.n_reuse)
+        return geo, stop_idx, tight
 
     def grid(self, request: PlanRequest) -> tuple[np.ndarray, np.ndarray]:
         """The nodes of the request's stretch and the indices of interior rest nodes."""
@@ -183,7 +424,7 @@ class LPPlanner:
         if not s1 > s0:
             raise PlanningError(f"lp: s_end {s1} must exceed start.s {s0}")
         h = self.grid_step or default_grid_step(request.path, request.limits)
-        corners = np.asarray(request.path.corners_s(), dtype=float)
+        corners = self.corners(request.path)
         return build_grid(s0, s1, h, request.start.v <= _REST, request.v_end <= _REST, corners)
 
     def solve_grid(
@@ -195,12 +436,17 @@ class LPPlanner:
         fixed_head: np.ndarray | None = None,
         start_q: np.ndarray | None = None,
         passes: int | None = None,
+        start_envelope: bool = True,
+        q_star_head: np.ndarray | None = None,
     ) -> GridPlan:
         """Velocity+acceleration pass (unless start_q is given), then up to `passes`
-        (default max_passes) jerk passes."""
+        (default max_passes) jerk passes. start_envelope: bound q by the S-curve from the
+        start state (not at a seam, whose first nodes are fixed). q_star_head: the jerk
+        rows' linearization point on the first nodes (a seam's last solution there)."""
         lim = request.limits
         q_hi = np.minimum(self._caps(request, geo, tight),
-                          self._envelope(request, geo, tight, stop_idx))
+                          self._envelope(request, geo, tight, stop_idx,
+                                         include_start=start_envelope))
         q_lo = np.zeros_like(q_hi)
         fixed = {0: request.start.v**2, geo.n_nodes - 1: request.v_end**2}
         fixed.update({int(i): 0.0 for i in stop_idx})
@@ -217,13 +463,18 @@ class LPPlanner:
         weight = np.gradient(geo.s)
         plan = GridPlan(geo.s, np.zeros(geo.n_nodes), np.inf)
         q_star = start_q
+        if q_star is None and q_star_head is not None and not self.seam_va_pass:
+            q_star = np.concatenate([q_star_head, q_hi[q_star_head.size:]])
         if q_star is None:
             q_star = self._solve(plan, weight, q_lo, q_hi, base, geo.n_nodes, record=False)
+            if q_star_head is not None:
+                q_star = np.concatenate([q_star_head, q_star[q_star_head.size:]])
         q_floor = 1e-6 * float(np.max(q_hi))
         rest = [i for i, val in fixed.items() if val <= _REST**2]
-        if request.start.v > _REST:
+        if request.start.v > _REST and (q_star_head is None or not self.seam_jerk_change):
             # the moving start's own jerk is whatever its previous plan had: the
             # jerk-change regularizer there made replans from braking states infeasible
+            # (not at a seam, whose head satisfies it: its own plan's rows)
             rest += list(range(self.free_start_nodes))
         rest = np.unique(np.array(rest, dtype=int))
         best_q, best_t = None, np.inf
@@ -231,6 +482,8 @@ class LPPlanner:
             rows = [*base, jerk_rows(geo, lim.jmax, tight.jerk, q_star, q_floor),
                     jerk_change_rows(geo, lim.jmax, q_star, q_floor, self.jerk_step, rest)]
             q = self._solve(plan, weight, q_lo, q_hi, rows, geo.n_nodes, record=True)
+            for i, val in fixed.items():  # exactly, not to the solver's rounding
+                q[i] = val
             t = grid_time(geo.s, q)
             plan.pass_times.append(t)
             if t >= best_t * (1.0 - 1e-4):
@@ -244,7 +497,7 @@ class LPPlanner:
     # --- internals --------------------------------------------------------------------
     def _solve(self, plan: GridPlan, weight, q_lo, q_hi, rows: list[Rows], n: int,
                record: bool) -> np.ndarray:
-        lp = ScaledLP.build(weight, q_lo, q_hi, Rows.stack(rows, n))
+        lp = ScaledLP.build(weight, q_lo, q_hi, free_rows(Rows.stack(rows, n), q_lo >= q_hi))
         t0 = time.perf_counter()
         out = self.backend.solve(lp)
         plan.solver_ms.append(1e3 * (time.perf_counter() - t0))
@@ -288,7 +541,7 @@ class LPPlanner:
         return env
 
     def _pretighten(self, request: PlanRequest, geo: GridGeometry, tight: Tightening,
-                    stop_idx: np.ndarray) -> None:
+                    stop_idx: np.ndarray, first_free: int = 0) -> None:
         """Scale the jerk factor by `envelope_margin` where a start/stop envelope bounds
         q (and a few nodes around it): where the envelope's straight q (constant path
         acceleration) meets the velocity cap, the quintic reconstruction overshoots the
@@ -306,11 +559,19 @@ class LPPlanner:
         for off in range(1, self.zone_pad + 1):
             grown[off:] |= zone[:-off]
             grown[:-off] |= zone[off:]
+        grown[:first_free] = False  # reused nodes keep the factors they were solved with
         tight.jerk[grown] *= self.envelope_margin
 
-    def _profile(self, request: PlanRequest, plan: GridPlan) -> FeedProfile:
+    def _profile(self, request: PlanRequest, plan: GridPlan, a_start: float) -> FeedProfile:
         a_end = 0.0 if request.v_end <= _REST else None
-        return profile_from_grid(plan.s, plan.q, request.start.a, a_end)
+        return profile_from_grid(plan.s, plan.q, a_start, a_end)
+
+    @staticmethod
+    def _reach(request: PlanRequest, geo: GridGeometry) -> float:
+        """Braking distance from the top feed the velocity limits allow at the nodes."""
+        A, J = path_limits(request.path, request.limits)
+        return braking_distance(float(np.sqrt(np.max(velocity_caps(geo, request.limits.vmax)))),
+                                A, J)
 
     @staticmethod
     def _tighten(tight: Tightening, ratios: SampledRatios, profile: FeedProfile,
@@ -330,3 +591,25 @@ class LPPlanner:
                 sl = slice(max(i - 2, 0), min(i + 4, s.size))
                 per_node[sl] = np.minimum(per_node[sl], f)
             factors *= per_node
+
+
+def _same_limits(a: AxisLimits, b: AxisLimits) -> bool:
+    return (a is b) or (np.array_equal(a.vmax, b.vmax) and np.array_equal(a.amax, b.amax)
+                        and np.array_equal(a.jmax, b.jmax))
+
+
+def _time_at(profile: FeedProfile, piece: int, s: float) -> float | None:
+    """The time (from the profile's start) at which piece `piece` of s(t) passes s, or
+    None if it does not (the pieces are monotone: the feed is >= 0)."""
+    pp = profile.s_of_t
+    lo, hi = pp.x[piece], pp.x[piece + 1]
+    one = PPoly(pp.c[:, piece:piece + 1], pp.x[piece:piece + 2], extrapolate=False)
+    roots = one.solve(s, discontinuity=False, extrapolate=False)
+    roots = roots[np.isfinite(roots)]
+    if roots.size == 0:
+        ends = np.array([lo, hi])
+        k = int(np.argmin(np.abs(one(ends) - s)))
+        if abs(float(one(ends[k])) - s) > 1e-9 * max(abs(s), 1.0):
+            return None
+        roots = ends[k:k + 1]
+    return float(roots[0] - pp.x[0])

@@ -50,3 +50,12 @@ def build_grid(s0: float, s1: float, h: float, rest_start: bool, rest_end: bool,
         pieces.append(nodes)
         count += nodes.size
     return np.concatenate(pieces), np.array(stop_idx, dtype=int)
+
+
+def extend_grid(head: np.ndarray, s1: float, h: float, rest_end: bool, stops: np.ndarray,
+                head_stops: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A replan's grid: the reused nodes `head` (with rest-point indices `head_stops`),
+    then fresh nodes from head[-1] to s1 (path units) as `build_grid` places them."""
+    tail, tail_stops = build_grid(float(head[-1]), s1, h, False, rest_end, stops)
+    nodes = np.concatenate([head, tail[1:]])
+    return nodes, np.concatenate([head_stops, tail_stops + head.size - 1]).astype(int)

@@ -66,6 +66,22 @@ class GridGeometry:
     def n_nodes(self) -> int:
         return int(self.s.size)
 
+    def take(self, nodes: slice) -> GridGeometry:
+        """The geometry of a run of nodes (a replan reuses its previous grid's)."""
+        return GridGeometry(self.s[nodes], self.d1[nodes], self.d2[nodes], self.d3[nodes],
+                            None if self.u is None else self.u[nodes],
+                            None if self.sigma is None else self.sigma[nodes])
+
+    @staticmethod
+    def join(head: GridGeometry, tail: GridGeometry) -> GridGeometry:
+        """Nodes of `head` then those of `tail` (tail.s[0] > head.s[-1])."""
+        def cat(a, b):
+            return None if a is None or b is None else np.concatenate([a, b])
+
+        return GridGeometry(np.concatenate([head.s, tail.s]), cat(head.d1, tail.d1),
+                            cat(head.d2, tail.d2), cat(head.d3, tail.d3), cat(head.u, tail.u),
+                            cat(head.sigma, tail.sigma))
+
 
 @dataclass(frozen=True)
 class Rows:
@@ -90,6 +106,19 @@ class Rows:
                           shape=(int(indptr.size - 1), n))
         return Rows(A, np.concatenate([p.lower for p in parts]),
                     np.concatenate([p.upper for p in parts]))
+
+
+def free_rows(rows: Rows, fixed: np.ndarray) -> Rows:
+    """The rows with a nonzero coefficient on at least one variable not in `fixed` (a
+    boolean mask): rows on fixed variables only are constants that the solver can only
+    report infeasible, to its tolerance (a seam's head was verified with its plan)."""
+    A = rows.A.tocsr()
+    pattern = sp.csr_matrix(((np.abs(A.data) > 0).astype(float), A.indices, A.indptr),
+                            shape=A.shape)
+    keep = (pattern @ (~fixed).astype(float)) > 0
+    if np.all(keep):
+        return rows
+    return Rows(A[keep], rows.lower[keep], rows.upper[keep])
 
 
 def banded(coef: np.ndarray, first_col: np.ndarray, n: int) -> sp.csr_matrix:
