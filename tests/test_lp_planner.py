@@ -22,7 +22,8 @@ from lookahead.planning.lp_rows import (
     nodal_acceleration,
     nodal_jerk,
 )
-from lookahead.planning.window import WindowedLP, concatenate, truncate
+from lookahead.planning.profile_ops import concatenate, slice_profile
+from lookahead.planning.window import WindowedLP
 from lookahead.sampling import sample_plan
 
 LIMITS = AxisLimits(np.array([500.0, 720.0]), np.array([2000.0, 3000.0]),
@@ -141,7 +142,7 @@ def test_windows_from_random_start_states_are_continuous(whole, path):
         new = planner.plan(window)
         s0, v0, a0, _ = new.profile.at(np.array([0.0]))[:, 0]
         assert (s0, v0, a0) == pytest.approx((start.s, start.v, start.a), rel=1e-9, abs=1e-9)
-        stitched = concatenate([truncate(res.profile, t_c), new.profile])
+        stitched = concatenate([slice_profile(res.profile, 0.0, t_c), new.profile])
         rep = checker_ok(path, stitched)
         assert rep.violations == 0, rep.first
 

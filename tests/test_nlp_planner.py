@@ -22,13 +22,12 @@ from lookahead.planning.nlp import (
     SampledPlan,
     Window,
     WindowProblem,
-    concatenate,
     knot_vector,
     rest_shape,
     rest_weight,
-    slice_profile,
     velocity_cap,
 )
+from lookahead.planning.profile_ops import concatenate, slice_profile
 from lookahead.sampling import sample_plan
 
 LIMITS = AxisLimits(np.array([500.0, 720.0]), np.array([2000.0, 3000.0]),

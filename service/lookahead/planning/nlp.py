@@ -34,7 +34,6 @@ from __future__ import annotations
 import itertools
 import time
 from dataclasses import dataclass, field
-from math import comb
 
 import numpy as np
 from scipy.interpolate import BSpline, PPoly
@@ -52,6 +51,7 @@ from lookahead.planning.base import (
 )
 from lookahead.planning.grid_profile import interval_durations, quintic_coefficients
 from lookahead.planning.lp_envelope import braking_distance, path_limits
+from lookahead.planning.profile_ops import concatenate, slice_profile
 from lookahead.sampling import sample_plan
 
 _REST = 1e-9  # feeds below this (path units / s) count as rest
@@ -611,36 +611,3 @@ def hermite_profile(s: np.ndarray, v: np.ndarray, a: np.ndarray) -> FeedProfile:
     return FeedProfile(PPoly(coeffs, np.concatenate([[0.0], np.cumsum(T)]), extrapolate=False))
 
 
-def slice_profile(profile: FeedProfile, t0: float, t1: float) -> FeedProfile:
-    """The profile between its times t0 < t1 (s from its start), re-timed to start at 0:
-    each piece re-expanded about its new left end (Taylor coefficients from derivatives)."""
-    pp = profile.s_of_t
-    x0 = pp.x[0]
-    inner = pp.x[(pp.x > x0 + t0 + 1e-12) & (pp.x < x0 + t1 - 1e-12)]
-    edges = np.concatenate([[x0 + t0], inner, [x0 + t1]])
-    deg = pp.c.shape[0] - 1
-    left = edges[:-1]
-    # evaluate just inside each new piece so that a breakpoint uses the piece on its right
-    idx = np.clip(np.searchsorted(pp.x, left, side="right") - 1, 0, pp.c.shape[1] - 1)
-    dx = left - pp.x[idx]
-    c = np.zeros((deg + 1, left.size))
-    for n in range(deg + 1):  # n-th Taylor coefficient of piece idx about dx
-        for m in range(n, deg + 1):
-            c[deg - n] += pp.c[deg - m, idx] * comb(m, n) * dx ** (m - n)
-    return FeedProfile(PPoly(c, edges - edges[0], extrapolate=False))
-
-
-
-
-def concatenate(profiles: list[FeedProfile]) -> FeedProfile:
-    """Profiles played one after the other (each starts where the previous one ends)."""
-    degree = max(p.s_of_t.c.shape[0] for p in profiles)
-    xs, cs, offset = [np.zeros(1)], [], 0.0
-    for p in profiles:
-        pp = p.s_of_t
-        c = np.zeros((degree, pp.c.shape[1]))
-        c[degree - pp.c.shape[0]:] = pp.c
-        cs.append(c)
-        xs.append(offset + (pp.x[1:] - pp.x[0]))
-        offset = xs[-1][-1]
-    return FeedProfile(PPoly(np.concatenate(cs, axis=1), np.concatenate(xs), extrapolate=False))

@@ -29,6 +29,7 @@ from lookahead.planning.base import (
 from lookahead.planning.lp import LPPlanner
 from lookahead.planning.lp_envelope import braking_distance, path_limits
 from lookahead.planning.lp_rows import GridGeometry, velocity_caps
+from lookahead.planning.profile_ops import concatenate, slice_profile
 
 
 def path_braking_distance(path: Path, limits: AxisLimits, s0: float = 0.0,
@@ -39,27 +40,6 @@ def path_braking_distance(path: Path, limits: AxisLimits, s0: float = 0.0,
     v = float(np.sqrt(np.max(velocity_caps(geo, limits.vmax))))
     a_max, j_max = path_limits(path, limits)
     return braking_distance(v, a_max, j_max)
-
-
-def truncate(profile: FeedProfile, t_end: float) -> FeedProfile:
-    """The profile on [0, t_end]; t_end must be one of its breakpoints (relative time)."""
-    pp = profile.s_of_t
-    k = int(np.argmin(np.abs(pp.x - (pp.x[0] + t_end))))
-    return FeedProfile(PPoly(pp.c[:, :k], pp.x[: k + 1], extrapolate=False))
-
-
-def concatenate(profiles: list[FeedProfile]) -> FeedProfile:
-    """Profiles played one after the other (each starts where the previous one ends)."""
-    degree = max(p.s_of_t.c.shape[0] for p in profiles)
-    xs, cs, offset = [np.zeros(1)], [], 0.0
-    for p in profiles:
-        pp = p.s_of_t
-        c = np.zeros((degree, pp.c.shape[1]))
-        c[degree - pp.c.shape[0]:] = pp.c
-        cs.append(c)
-        xs.append(offset + (pp.x[1:] - pp.x[0]))
-        offset = xs[-1][-1]
-    return FeedProfile(PPoly(np.concatenate(cs, axis=1), np.concatenate(xs), extrapolate=False))
 
 
 @dataclass
@@ -156,7 +136,7 @@ class WindowedLP:
                 previous = None
                 continue
             t_commit = self.commit_point(res, s_we, self.window_braking(res, brake, a_j))
-            head = truncate(res.profile, t_commit)
+            head = slice_profile(res.profile, 0.0, t_commit)
             tail = FeedProfile(PPoly(res.profile.s_of_t.c[:, head.s_of_t.c.shape[1]:],
                                      res.profile.s_of_t.x[head.s_of_t.c.shape[1]:],
                                      extrapolate=False))
