@@ -53,35 +53,14 @@ class Path(ABC):
     def eval_s(self, s: np.ndarray, order: int = 3) -> np.ndarray:
         """Position and derivatives with respect to arc length s.
 
-        Returns shape (order + 1, len(s), naxes): [x, x_s, x_ss, x_sss][:order+1].
-        Chain rule with sigma(u) = ||path_scale * x_u||: u_s = 1/sigma,
-        u_ss = -sigma_u / sigma^3, u_sss = (3 sigma_u^2 - sigma sigma_uu) / sigma^5.
-        """
+        Returns shape (order + 1, len(s), naxes): [x, x_s, x_ss, x_sss][:order+1]
+        (see `arc_length_derivatives`)."""
         s = np.atleast_1d(np.asarray(s, dtype=float))
-        u = self.u_of_s(s)
-        d = self.eval_u(u, order=max(order, 1))
-        w = self.path_scale**2
-        xu = d[1]
-        sigma = np.sqrt(np.sum(w * xu * xu, axis=-1))
-        sigma = np.maximum(sigma, np.finfo(float).tiny)
-        out = np.empty((order + 1, s.size, self.naxes))
-        out[0] = d[0]
-        if order >= 1:
-            us = 1.0 / sigma
-            out[1] = xu * us[:, None]
-        if order >= 2:
-            xuu = d[2]
-            sigma_u = np.sum(w * xu * xuu, axis=-1) / sigma
-            uss = -sigma_u / sigma**3
-            out[2] = xuu * (us**2)[:, None] + xu * uss[:, None]
-        if order >= 3:
-            xuuu = d[3]
-            sigma_uu = (np.sum(w * xuu * xuu, axis=-1) + np.sum(w * xu * xuuu, axis=-1)
-                        - sigma_u**2) / sigma
-            usss = (3.0 * sigma_u**2 - sigma * sigma_uu) / sigma**5
-            out[3] = (xuuu * (us**3)[:, None] + 3.0 * xuu * (us * uss)[:, None]
-                      + xu * usss[:, None])
-        return out
+        d = self.eval_u(self.u_of_s(s), order=max(order, 1))
+        # orders not asked for are zero-padded: x_s..x_s^(order) do not depend on them
+        d = np.concatenate([d, np.zeros((4 - d.shape[0], *d.shape[1:]))])
+        _, xs, xss, xsss = arc_length_derivatives(d, self.path_scale)
+        return np.stack([d[0], xs, xss, xsss])[: order + 1]
 
     @abstractmethod
     def breakpoints_s(self) -> np.ndarray:
@@ -98,3 +77,27 @@ class Path(ABC):
     def corners_s(self) -> np.ndarray:
         """Arc lengths of tangent discontinuities, where the machine must come to rest."""
         return np.empty(0)
+
+
+def arc_length_derivatives(d: np.ndarray, path_scale: np.ndarray
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """sigma = ds/du (n,) and x_s, x_ss, x_sss (each (n, naxes)) from the u-derivatives
+    d = path.eval_u(u, 3) (shape (4, n, naxes)): the chain rule through u(s), for callers
+    that hold u and so skip the arc-length inversion.
+
+    With sigma(u) = ||path_scale * x_u||: u_s = 1/sigma, u_ss = -sigma_u / sigma^3,
+    u_sss = (3 sigma_u^2 - sigma sigma_uu) / sigma^5.
+    """
+    w = np.asarray(path_scale, dtype=float) ** 2
+    xu, xuu, xuuu = d[1], d[2], d[3]
+    sigma = np.maximum(np.sqrt(np.sum(w * xu * xu, axis=-1)), np.finfo(float).tiny)
+    sigma_u = np.sum(w * xu * xuu, axis=-1) / sigma
+    sigma_uu = (np.sum(w * xuu * xuu, axis=-1) + np.sum(w * xu * xuuu, axis=-1)
+                - sigma_u**2) / sigma
+    us = 1.0 / sigma
+    uss = -sigma_u / sigma**3
+    usss = (3.0 * sigma_u**2 - sigma * sigma_uu) / sigma**5
+    xs = xu * us[:, None]
+    xss = xuu * (us**2)[:, None] + xu * uss[:, None]
+    xsss = xuuu * (us**3)[:, None] + 3.0 * xuu * (us * uss)[:, None] + xu * usss[:, None]
+    return sigma, xs, xss, xsss

@@ -20,25 +20,12 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from lookahead.geometry.base import Path
+from lookahead.geometry.base import Path, arc_length_derivatives
 
 
 def s_derivatives(d: np.ndarray, path_scale: np.ndarray) -> tuple[np.ndarray, ...]:
-    """x_s, x_ss, x_sss (each (n, naxes)) and sigma = ds/du (n,) from the u-derivatives
-    d = path.eval_u(u, 3) (the chain rule of `Path.eval_s`, for callers that already
-    hold u and so skip the arc-length inversion)."""
-    w = path_scale**2
-    xu, xuu, xuuu = d[1], d[2], d[3]
-    sigma = np.maximum(np.sqrt(np.sum(w * xu * xu, axis=-1)), np.finfo(float).tiny)
-    sigma_u = np.sum(w * xu * xuu, axis=-1) / sigma
-    sigma_uu = (np.sum(w * xuu * xuu, axis=-1) + np.sum(w * xu * xuuu, axis=-1)
-                - sigma_u**2) / sigma
-    us = 1.0 / sigma
-    uss = -sigma_u / sigma**3
-    usss = (3.0 * sigma_u**2 - sigma * sigma_uu) / sigma**5
-    d1 = xu * us[:, None]
-    d2 = xuu * (us**2)[:, None] + xu * uss[:, None]
-    d3 = xuuu * (us**3)[:, None] + 3.0 * xuu * (us * uss)[:, None] + xu * usss[:, None]
+    """x_s, x_ss, x_sss (each (n, naxes)) and sigma = ds/du (n,) from d = path.eval_u(u, 3)."""
+    sigma, d1, d2, d3 = arc_length_derivatives(d, path_scale)
     return d1, d2, d3, sigma
 
 
