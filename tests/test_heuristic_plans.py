@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from lookahead.checker import check_positions
@@ -101,19 +101,34 @@ def test_mid_motion_restart_is_continuous_and_within_limits():
         assert abs(end[1, 0]) < 1e-6
 
 
-@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=60, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
 @given(seed=st.integers(0, 2**31 - 1), limit_scale=st.floats(0.8, 3.0),
-       npts=st.integers(4, 16))
-def test_random_smooth_paths_pass_checker(seed, limit_scale, npts):
-    """Random smooth paths: X keeps moving forward (no near-cusps, see the report)."""
+       npts=st.integers(3, 9), reversals=st.floats(0.0, 1.0),
+       max_cell=st.sampled_from([None, 0.5, 2.0]))
+def test_random_wandering_paths_pass_checker(seed, limit_scale, npts, reversals, max_cell):
+    """Random paths whose X goes back and forth: a step reverses X with a small C step
+    (0.1-2 deg, a near-cusp) with probability `reversals`, else it goes anywhere.
+    Long cells (max_cell) make the turns much narrower than a cell. Cubic fits only: a
+    pchip fit turns a point where both axes reverse into a cusp of the parameterization,
+    a corner the planner crawls into (see the report)."""
     rng = np.random.default_rng(seed)
-    steps = rng.normal(size=(npts, 2)) * np.array([4.0, 30.0]) + np.array([15.0, 0.0])
-    points = np.cumsum(np.vstack([[0.0, 0.0], steps]), axis=0)
+    back = rng.random(npts) < reversals
+    sign = np.where(np.arange(npts) % 2 == 0, 1.0, -1.0)
+    dx = np.where(back, sign * rng.uniform(3.0, 30.0, npts), rng.normal(size=npts) * 15.0)
+    dc = np.where(back, rng.uniform(0.1, 2.0, npts), rng.normal(size=npts) * 30.0)
+    points = np.cumsum(np.vstack([[0.0, 0.0], np.c_[dx, dc]]), axis=0)
     path = fit_points(points, SCALE, "cubic")
+    # Where the arc-length table did not converge (its quadrature split hit the cap), the
+    # sampler's x(s) carries ~1e-7 mm of noise, which alone moves the finite-difference
+    # jerk by ~1e3 unit/s^3: the judge itself would be off, so such paths are skipped.
+    assume(path.interval_lengths[1].max() < 256)
     limits = AxisLimits(LIMITS.vmax * limit_scale, LIMITS.amax * limit_scale,
                         LIMITS.jmax * limit_scale)
-    _, samples, report = plan_and_check(
-        path, PlanRequest(path, limits, PathState(0.0), path.length, dt=DT))
+    request = PlanRequest(path, limits, PathState(0.0), path.length, dt=DT)
+    result = HeuristicPlanner(max_cell=max_cell).plan(request)
+    samples = sample_plan(path, result.profile, DT)
+    report = check_positions(samples.pos, limits, DT)
     assert report.ok, report.first
     np.testing.assert_allclose(samples.pos[-1], points[-1], atol=1e-6)
 

@@ -105,6 +105,14 @@ class PiecewisePath(Path):
         u = np.clip(np.atleast_1d(np.asarray(u, dtype=float)), *self.u_range)
         return np.stack(self._raw(u, order))
 
+    def eval_u_derivatives(self, u: np.ndarray, order: int = 3) -> list[np.ndarray]:
+        """d^k x/du^k for k = 1..order, each (n, naxes): `eval_u` without the position
+        (not evaluated at all for a polynomial curve; a rational one needs it)."""
+        u = np.clip(np.atleast_1d(np.asarray(u, dtype=float)), *self.u_range)
+        if self._weight is None:
+            return [self._numer[j](u) for j in range(1, order + 1)]
+        return self._raw(u, order)[1:]
+
     def _speed(self, u: np.ndarray) -> np.ndarray:
         """sigma(u) = ||path_scale * dx/du||."""
         xu = self._raw(u, 1)[1]

@@ -362,14 +362,17 @@ class HeuristicPlanner:
     def _failing_segments(self, profile: FeedProfile, grid: PathGrid, starts: np.ndarray,
                           request: PlanRequest) -> np.ndarray:
         """Segments where some axis exceeds its full limit at a grid point."""
-        s = grid.s.ravel()
-        v, a, j = (x.reshape(grid.s.shape)[:, :, None] for x in state_at_s(profile, s))
-        vel = np.abs(grid.xs * v)
-        acc = np.abs(grid.xss * v * v + grid.xs * a)
-        jerk = np.abs(grid.xsss * v**3 + 3.0 * grid.xss * v * a + grid.xs * j)
+        ncell, npts, naxes = grid.xs.shape
+        v, a, j = (x[:, None] for x in state_at_s(profile, grid.s.ravel()))
+        # flat (points, axes) views: one pass per term, no broadcasting over cell axes
+        xs, xss, xsss = (x.reshape(-1, naxes) for x in (grid.xs, grid.xss, grid.xsss))
         lim = request.limits
-        jmax = lim.jmax * grid.jerk_scale[:, None, None]
-        bad_cell = np.any((vel > lim.vmax) | (acc > lim.amax) | (jerk > jmax), axis=(1, 2))
+        jmax = (lim.jmax if np.all(grid.jerk_scale == 1.0)
+                else np.repeat(grid.jerk_scale, npts)[:, None] * lim.jmax)
+        bad = np.abs(xs * v) > lim.vmax
+        bad |= np.abs(xss * (v * v) + xs * a) > lim.amax
+        bad |= np.abs(xsss * (v * v * v) + xss * (3.0 * v * a) + xs * j) > jmax
+        bad_cell = bad.reshape(ncell, -1).any(axis=1)
         return np.logical_or.reduceat(bad_cell, starts[:-1])
 
 

@@ -77,19 +77,21 @@ def s_derivatives_at_u(path: Path, u: np.ndarray) -> tuple[np.ndarray, ...]:
 
     The chain rule of `Path.eval_s`, applied at given u: the grid is laid out in u, which
     avoids inverting u(s) (90 % of the cost of eval_s) for thousands of points."""
-    d = path.eval_u(u, order=3)
-    xu, xuu, xuuu = d[1], d[2], d[3]
+    fast = getattr(path, "eval_u_derivatives", None)  # skips the position if it can
+    xu, xuu, xuuu = fast(u, 3) if fast is not None else path.eval_u(u, order=3)[1:]
+    # weighted sums over the few axes as matrix-vector products, reciprocals reused:
+    # half the time of axis-wise np.sum and divisions on the 10^5 points of a long job
     w = path.path_scale**2
-    sigma = np.maximum(np.sqrt(np.sum(w * xu * xu, axis=-1)), np.finfo(float).tiny)
-    sigma_u = np.sum(w * xu * xuu, axis=-1) / sigma
-    sigma_uu = (np.sum(w * xuu * xuu, axis=-1) + np.sum(w * xu * xuuu, axis=-1)
-                - sigma_u**2) / sigma
+    sigma = np.maximum(np.sqrt((xu * xu) @ w), np.finfo(float).tiny)
     us = 1.0 / sigma
-    uss = -sigma_u / sigma**3
-    usss = (3.0 * sigma_u**2 - sigma * sigma_uu) / sigma**5
+    sigma_u = ((xu * xuu) @ w) * us
+    sigma_uu = ((xuu * xuu) @ w + (xu * xuuu) @ w - sigma_u * sigma_u) * us
+    us2 = us * us
+    uss = -sigma_u * us2 * us
+    usss = (3.0 * sigma_u * sigma_u - sigma * sigma_uu) * (us2 * us2 * us)
     xs = xu * us[:, None]
-    xss = xuu * (us**2)[:, None] + xu * uss[:, None]
-    xsss = xuuu * (us**3)[:, None] + 3.0 * xuu * (us * uss)[:, None] + xu * usss[:, None]
+    xss = xuu * us2[:, None] + xu * uss[:, None]
+    xsss = xuuu * (us2 * us)[:, None] + xuu * (3.0 * us * uss)[:, None] + xu * usss[:, None]
     return sigma, xs, xss, xsss
 
 
@@ -106,6 +108,72 @@ def _cell_arc_lengths(sigma: np.ndarray, du: np.ndarray) -> tuple[np.ndarray, np
     total = first_half + second_half
     partial = np.stack([np.zeros_like(du), first_half, total, quarter, three_quarter], axis=1)
     return total, partial
+
+
+@dataclass(frozen=True)
+class _Cells:
+    """Cells in u (start u0, width du, node interval) and the geometry at their points:
+    sigma (ncell, npoints), xs/xss/xsss (ncell, npoints, naxes)."""
+
+    u0: np.ndarray
+    du: np.ndarray
+    node: np.ndarray
+    sigma: np.ndarray
+    xs: np.ndarray
+    xss: np.ndarray
+    xsss: np.ndarray
+
+
+def _evaluate_cells(path: Path, u0: np.ndarray, du: np.ndarray, node: np.ndarray) -> _Cells:
+    fractions = np.concatenate([BUDGET_FRACTIONS, CHECK_FRACTIONS])
+    u = u0[:, None] + du[:, None] * fractions[None, :]
+    sigma, xs, xss, xsss = s_derivatives_at_u(path, u.ravel())
+    shape = (*u.shape, path.naxes)
+    return _Cells(u0, du, node, sigma.reshape(u.shape),
+                  *(x.reshape(shape) for x in (xs, xss, xsss)))
+
+
+#: a cell whose path speed sigma = ds/du varies more than this ratio over its points is
+#: split into REFINE_SPLIT cells, up to REFINE_LEVELS times
+REFINE_RATIO = 1.2
+REFINE_SPLIT = 4
+REFINE_LEVELS = 10
+
+
+def _refine_cells(path: Path, cells: _Cells, corner_node: np.ndarray) -> _Cells:
+    """Split cells where the geometry in s is not resolved by the cell's points.
+
+    Within a knot interval x(u) is a polynomial, smooth on the interval's scale; all
+    sharper variation of x_s, x_ss, x_sss comes from the chain rule through sigma(u),
+    which dips where the path nearly reverses (near-cusps: x_sss can grow by orders of
+    magnitude within a cell, and a peak between points escapes the verification). A cell
+    whose sigma varies by less than REFINE_RATIO over its points resolves the dip, so
+    cells are split until that holds (a true cusp, sigma = 0, stops at REFINE_LEVELS).
+
+    Cells next to a corner (`corner_node`: (nnodes,) True where a node is a corner) are
+    left alone: the machine stops there, and where the corner is a cusp of the
+    parameterization (sigma -> 0 at the knot, e.g. pchip with both axes at an extremum)
+    the chain rule is pure cancellation close to it, so finer cells would only see noise."""
+    for _ in range(REFINE_LEVELS):
+        lo, hi = np.min(cells.sigma, axis=1), np.max(cells.sigma, axis=1)
+        node = cells.node
+        first = np.concatenate([[True], node[1:] != node[:-1]])
+        last = np.concatenate([node[1:] != node[:-1], [True]])
+        at_corner = (first & corner_node[node]) | (last & corner_node[node + 1])
+        sharp = (hi > REFINE_RATIO * lo) & ~at_corner
+        if not np.any(sharp):
+            break
+        idx = np.nonzero(sharp)[0]
+        du = np.repeat(cells.du[idx] / REFINE_SPLIT, REFINE_SPLIT)
+        u0 = (np.repeat(cells.u0[idx], REFINE_SPLIT)
+              + du * np.tile(np.arange(REFINE_SPLIT), idx.size))
+        fine = _evaluate_cells(path, u0, du, np.repeat(cells.node[idx], REFINE_SPLIT))
+        # cells stay ordered in u: each split cell is replaced by its parts in place
+        keep = np.nonzero(~sharp)[0]
+        order = np.argsort(np.concatenate([keep, np.repeat(idx, REFINE_SPLIT)]), kind="stable")
+        cells = _Cells(*(np.concatenate([getattr(cells, f)[keep], getattr(fine, f)])[order]
+                         for f in ("u0", "du", "node", "sigma", "xs", "xss", "xsss")))
+    return cells
 
 
 def build_grid(path: Path, s_begin: float, s_end: float, dt: float, limits: AxisLimits,
@@ -135,18 +203,18 @@ def build_grid(path: Path, s_begin: float, s_end: float, dt: float, limits: Axis
     offset = np.arange(cell_node.size) - np.repeat(np.cumsum(nsub) - nsub, nsub)
     du = (nodes_u[1:] - nodes_u[:-1])[cell_node] / nsub[cell_node]
     u0 = nodes_u[cell_node] + du * offset
-    fractions = np.concatenate([BUDGET_FRACTIONS, CHECK_FRACTIONS])
-    u = u0[:, None] + du[:, None] * fractions[None, :]
-    sigma, xs, xss, xsss = s_derivatives_at_u(path, u.ravel())
-    shape = (*u.shape, path.naxes)
-    xs, xss, xsss = (x.reshape(shape) for x in (xs, xss, xsss))
-    total, partial = _cell_arc_lengths(sigma.reshape(u.shape), du)
+    cells = _refine_cells(path, _evaluate_cells(path, u0, du, cell_node),
+                          np.isin(nodes, corners))
+    u0, du, cell_node = cells.u0, cells.du, cells.node
+    sigma, xs, xss, xsss = cells.sigma, cells.xs, cells.xss, cells.xsss
+    total, partial = _cell_arc_lengths(sigma, du)
+    first_cell = np.searchsorted(cell_node, np.arange(lengths.size))
     # rescale each node interval's cells to its exact length
-    approx = np.add.reduceat(total, np.cumsum(nsub) - nsub)
+    approx = np.add.reduceat(total, first_cell)
     scale = np.where(approx > 0, lengths / np.where(approx > 0, approx, 1.0), 1.0)[cell_node]
     total, partial = total * scale, partial * scale[:, None]
     cell_start = np.concatenate([[0.0], np.cumsum(total)])
-    node_start = (cell_start[np.cumsum(nsub) - nsub])[cell_node]
+    node_start = cell_start[first_cell][cell_node]
     edges_rel = cell_start[:-1] - node_start
     edges = np.concatenate([nodes[cell_node] + edges_rel, [s_end]])
     # `partial` is at fractions (0, .5, 1, .25, .75); move the ends to the inset points
@@ -222,18 +290,38 @@ def _c1_knot_zones(path: Path, nodes: np.ndarray, nodes_u: np.ndarray, knots: np
     return all_s, all_u, nodes[idx], cap
 
 
+def _abs_max_over_points(x: np.ndarray, npoints: int) -> np.ndarray:
+    """max over the first `npoints` points of |x| (ncell, points, naxes) -> (ncell, naxes);
+    elementwise over point slices (numpy reduces a short middle axis slowly)."""
+    out = np.abs(x[:, 0, :])
+    for k in range(1, npoints):
+        np.maximum(out, np.abs(x[:, k, :]), out=out)
+    return out
+
+
+def _min_over_columns(x: np.ndarray) -> np.ndarray:
+    """Row minima of a (rows, few columns) array, column by column (faster than a numpy
+    reduction over a short last axis)."""
+    out = x[:, 0].copy()
+    for k in range(1, x.shape[1]):
+        np.minimum(out, x[:, k], out=out)
+    return out
+
+
 def feed_limit(grid: PathGrid, limits: AxisLimits, shares: BudgetShares,
                feed_cap: FeedCap | None = None) -> np.ndarray:
     """Per-cell feed limit (path units/s): min over the cell's budget points of the axis
     velocity, centripetal and geometric-jerk limits, the C1-knot cap and the feed cap."""
     nb = BUDGET_FRACTIONS.size
-    xs, xss, xsss = (np.abs(x[:, :nb, :]) for x in (grid.xs, grid.xss, grid.xsss))
-    jmax = limits.jmax * grid.jerk_scale[:, None, None]
+    # each bound falls with its |derivative|: take the largest over the budget points
+    # first, then one division / root per cell and axis
+    xs, xss, xsss = (_abs_max_over_points(x, nb) for x in (grid.xs, grid.xss, grid.xsss))
+    jmax = limits.jmax * grid.jerk_scale[:, None]
     with np.errstate(divide="ignore"):
         v_vel = limits.vmax / xs
         v_acc = np.sqrt(shares.centripetal * limits.amax / xss)
         v_jerk = np.cbrt(shares.jerk_geometric * jmax / xsss)
-    v = np.min(np.minimum(np.minimum(v_vel, v_acc), v_jerk), axis=(1, 2))
+    v = np.min(np.minimum(np.minimum(v_vel, v_acc), v_jerk), axis=1)
     v = np.minimum(v, grid.c1_cap)
     if feed_cap is not None:
         mid = grid.s[:, 1]
@@ -287,18 +375,22 @@ def segment_budgets(grid: PathGrid, starts: np.ndarray, vlim: np.ndarray,
         V = np.minimum(V, v_cap)
     V = V * factor
     nb = BUDGET_FRACTIONS.size
-    xs, xss, xsss = (np.abs(x[:, :nb, :]) for x in (grid.xs, grid.xss, grid.xsss))
-    Vc = V[seg_of_cell][:, None, None]
-    jmax = limits.jmax * grid.jerk_scale[:, None, None]
+    ncell = grid.ncells
+    # budget points flattened to columns (ncell, nb * naxes); limits tiled to match
+    xs, xss, xsss = (np.abs(x[:, :nb, :]).reshape(ncell, -1)
+                     for x in (grid.xs, grid.xss, grid.xsss))
+    amax = np.tile(limits.amax, nb)
+    Vc = V[seg_of_cell][:, None]
+    jmax = np.tile(limits.jmax, nb) * grid.jerk_scale[:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
-        a_cell = np.where(xs > 0, (limits.amax - xss * Vc**2) / xs, np.inf)
+        a_cell = np.where(xs > 0, (amax - xss * Vc**2) / xs, np.inf)
         a_cell = np.minimum(a_cell, np.where(xss > 0, shares.jerk_coupling * jmax
                                              / (3.0 * xss * Vc), np.inf))
-    A = np.minimum.reduceat(np.min(a_cell, axis=(1, 2)), starts[:-1])
-    Ac = A[seg_of_cell][:, None, None]
+    A = np.minimum.reduceat(_min_over_columns(a_cell), starts[:-1])
+    Ac = A[seg_of_cell][:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
         j_cell = np.where(xs > 0, (jmax - xsss * Vc**3 - 3.0 * xss * Vc * Ac) / xs, np.inf)
-    J = np.minimum.reduceat(np.min(j_cell, axis=(1, 2)), starts[:-1])
+    J = np.minimum.reduceat(_min_over_columns(j_cell), starts[:-1])
     s0 = grid.edges[starts[:-1]]
     L = grid.edges[starts[1:]] - s0
     return SegmentBudgets(s0, L, V, A * factor, J * factor)

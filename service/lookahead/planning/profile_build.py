@@ -52,25 +52,36 @@ def state_at_s(profile: FeedProfile, s: np.ndarray) -> np.ndarray:
     rise = piece_end[idx] - c3
     with np.errstate(divide="ignore", invalid="ignore"):
         tau = np.where(rise > 0, np.clip(target / rise, 0.0, 1.0) * width, 0.0)
-    lo = np.zeros_like(s)
-    hi = width.copy()
-    active = np.arange(s.size)
+        # start from the root of the quadratic part c1 t^2 + c2 t = target where it has
+        # one (cruise and constant-acceleration pieces: exact; elsewhere a few Newton
+        # steps fewer than from the chord)
+        root = 2.0 * target / (c2 + np.sqrt(np.maximum(c2 * c2 + 4.0 * c1 * target, 0.0)))
+        tau = np.where(np.isfinite(root) & (root >= 0.0) & (root <= width), root, tau)
+    # the iteration works on compacted copies of the unconverged entries (the first pass,
+    # over all of them, needs no gather: most grid points converge in it)
+    ids = None
+    t, a0, a1, a2, goal, w = tau, c0, c1, c2, target, width
+    lo, hi = np.zeros_like(s), width
     for _ in range(60):
-        if not active.size:
-            break
-        t = tau[active]
-        a0, a1, a2 = c0[active], c1[active], c2[active]
-        f = ((a0 * t + a1) * t + a2) * t - target[active]
-        lo[active] = np.where(f < 0, t, lo[active])
-        hi[active] = np.where(f >= 0, t, hi[active])
+        f = ((a0 * t + a1) * t + a2) * t - goal
+        below = f < 0
+        lo = np.where(below, t, lo)
+        hi = np.where(below, hi, t)
         fp = (3.0 * a0 * t + 2.0 * a1) * t + a2
         with np.errstate(divide="ignore", invalid="ignore"):
             newton = t - f / fp
-        ok = (fp > 0) & (newton >= lo[active]) & (newton <= hi[active])
-        t_new = np.where(ok, newton, 0.5 * (lo[active] + hi[active]))
-        tau[active] = t_new
-        done = np.abs(t_new - t) <= 1e-12 * width[active]
-        active = active[~done]
+        ok = (fp > 0) & (newton >= lo) & (newton <= hi)
+        t_new = np.where(ok, newton, 0.5 * (lo + hi))
+        if ids is None:
+            tau = t_new
+            ids = np.arange(s.size)
+        else:
+            tau[ids] = t_new
+        left = np.abs(t_new - t) > 1e-12 * w
+        if not left.any():
+            break
+        ids, t, a0, a1, a2, goal, w, lo, hi = (x[left] for x in (ids, t_new, a0, a1, a2, goal,
+                                                                  w, lo, hi))
     v = (3.0 * c0 * tau + 2.0 * c1) * tau + c2
     a = 6.0 * c0 * tau + 2.0 * c1
     j = 6.0 * c0
