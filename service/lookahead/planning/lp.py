@@ -15,14 +15,12 @@ import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.interpolate import PPoly
 
 from lookahead.geometry.base import Path
 from lookahead.limits import AxisLimits
 from lookahead.planning.base import FeedProfile, PlanningError, PlanRequest, PlanResult
 from lookahead.planning.grid_profile import (
     grid_time,
-    join_profiles,
     node_accelerations,
     profile_from,
     profile_from_grid,
@@ -40,10 +38,16 @@ from lookahead.planning.lp_rows import (
     start_slope_row,
     velocity_caps,
 )
+from lookahead.planning.lp_seam import (
+    FIXED_NODES,
+    REST,
+    LastPlan,
+    Seam,
+    find_seam,
+    join_last,
+)
 from lookahead.planning.lp_solve import ScaledLP, make_backend
 from lookahead.planning.sampled_check import SampledRatios, analytic_ratios
-
-_REST = 1e-9  # feeds below this (path units / s) count as rest
 
 
 @dataclass
@@ -71,39 +75,8 @@ class GridPlan:
     statuses: list[str] = field(default_factory=list)
 
 
-@dataclass
-class LastPlan:
-    """The planner's last plan, kept for replans that start on it: the request, the grid
-    geometry (from the node at or before its start), q, the node accelerations its profile
-    used, the final tightening, the interior rest nodes and the profile before it was cut
-    at the start (time 0 at geo.s[0])."""
-
-    request: PlanRequest
-    geo: GridGeometry
-    q: np.ndarray
-    a: np.ndarray
-    tight: Tightening
-    stop_idx: np.ndarray
-    profile: FeedProfile
-
-
-@dataclass
-class Seam:
-    """How a replan joins the last plan: its nodes 0..n_reuse-1 are the last plan's nodes
-    first..first+n_reuse-1 (geometry, tightening and jerk linearization point reused), of
-    which the first `FIXED_NODES` keep their q, so the first interval (cut at `t_cut`, s
-    into it) is exactly the last plan's: velocity, acceleration and jerk continue."""
-
-    last: LastPlan
-    first: int
-    n_reuse: int
-    t_cut: float
-
-
-#: q fixed at a seam: velocity, acceleration and jerk of the first interval (DESIGN.md)
-FIXED_NODES = 3
-
-
+#: a failed plan from scratch is tried on finer grids up to this many intervals
+MAX_REFINED_NODES = 256
 def default_grid_step(path: Path, limits: AxisLimits, interval_s: float = 0.0045) -> float:
     """Grid spacing: the distance covered in `interval_s` at the fastest feed the axis
     velocity limits could allow (path units)."""
@@ -168,7 +141,9 @@ class LPPlanner:
         reuse: bool = True,
         seam_va_pass: bool = False,
         seam_jerk_change: bool = True,
+        stall_floor: float = 0.1,
     ) -> None:
+        self.stall_floor = stall_floor
         self.reuse = reuse
         self.seam_va_pass = seam_va_pass
         self.seam_jerk_change = seam_jerk_change
@@ -193,8 +168,9 @@ class LPPlanner:
         """Plan [start.s, s_end]. fixed_head: q values to impose on the first nodes
         (the windowed driver passes the committed nodes of the previous window).
 
-        A request that starts on this planner's last plan (same path object and limits,
-        the state at start.s equal to the plan's to rounding: the service's replans)
+        A request that starts on this planner's last plan (same limits, a path that
+        agrees with the last one where nodes are reused, the state at start.s equal to
+        the plan's to rounding: the service's replans; `lp_seam.find_seam`)
         continues it (`Seam`): first keeping the last plan up to one braking distance
         before the nearer window end and solving only the rest (`_plan_frozen`, as the
         windowed LP commits), then keeping half of that, then re-solving all but the
@@ -211,8 +187,30 @@ class LPPlanner:
                 except PlanningError:
                     self._last = last
         if result is None:
-            result = self._plan(request, fixed_head, None)
+            result = self._plan_cold(request, fixed_head)
         return PlanResult(result.profile, self.name, time.perf_counter() - t0, result.info)
+
+    def _plan_cold(self, request: PlanRequest, fixed_head: np.ndarray | None) -> PlanResult:
+        """A plan from scratch; if one from rest fails on a short stretch, again on grids
+        2x, 4x, ... finer while they have at most `MAX_REFINED_NODES` intervals: a stretch
+        of a few grid steps (short paths) is resolved by too few nodes for the jerk rows between
+        its start and stop S-curves (measured: 35-100 mm fits and B-spline pieces)."""
+        length = float(request.s_end - request.start.s)
+        h = self.grid_step or default_grid_step(request.path, request.limits)
+        try:
+            return self._plan(request, fixed_head, None)
+        except PlanningError:
+            if (fixed_head is not None or request.start.v > REST
+                    or length / (h / 2.0) > MAX_REFINED_NODES):
+                raise  # a moving start has the caller's fallback; no time to refine
+        finer = h / 2.0
+        while True:
+            try:
+                return self._plan(request, fixed_head, None, grid_step=finer)
+            except PlanningError:
+                finer /= 2.0
+                if length / finer > MAX_REFINED_NODES:
+                    raise
 
     def _plan_seam(self, request: PlanRequest, seam: Seam) -> PlanResult:
         return self._plan(request, None, seam)
@@ -227,22 +225,12 @@ class LPPlanner:
         last = seam.last
         i = seam.first
         j0 = i + seam.n_reuse - FIXED_NODES - back
-        if j0 <= i or i + seam.n_reuse == last.geo.n_nodes:
+        if j0 <= i or seam.reuses_all:
             return self._plan(request, None, seam)
         sub = self._plan(request, None, Seam(last, j0, FIXED_NODES, 0.0))
-        tail = self._last
-        assert tail is not None
-        pp = last.profile.s_of_t
-        full = join_profiles(FeedProfile(PPoly(pp.c[:, i:j0], pp.x[i:j0 + 1], extrapolate=False)),
-                             tail.profile)
-        kept = slice(i, j0)
-        old_stops = last.stop_idx[(last.stop_idx > i) & (last.stop_idx < j0)] - i
-        self._last = LastPlan(
-            request, GridGeometry.join(last.geo.take(kept), tail.geo),
-            np.concatenate([last.q[kept], tail.q]), np.concatenate([last.a[kept], tail.a]),
-            Tightening(*(np.concatenate([getattr(last.tight, f)[kept], getattr(tail.tight, f)])
-                         for f in ("vel", "acc", "jerk"))),
-            np.concatenate([old_stops, tail.stop_idx + (j0 - i)]).astype(int), full)
+        assert self._last is not None
+        self._last = join_last(last, i, j0, self._last, request)
+        full = self._last.profile
         info = dict(sub.info)
         info["seam"] = {"reused_nodes": seam.n_reuse, "t_cut": seam.t_cut, "frozen": j0 - i}
         info["grid_s"], info["grid_q"] = self._last.geo.s, self._last.q
@@ -253,57 +241,18 @@ class LPPlanner:
         self._last = None
 
     def find_seam(self, request: PlanRequest) -> Seam | None:
-        """The seam with the last plan if the request starts on it (moving), else None."""
-        last = self._last
-        start = request.start
-        if last is None or start.v <= _REST:
-            return None
-        old = last.request
-        if (request.path is not old.path or request.dt != old.dt
-                or not _same_limits(request.limits, old.limits)):
-            return None
-        s = last.geo.s
-        i = int(np.searchsorted(s, start.s, side="right")) - 1
-        if i < 0 or i >= s.size - 1:
-            return None
-        t_cut = _time_at(last.profile, i, start.s)
-        if t_cut is None:
-            return None
-        _, v, a, _ = last.profile.at(np.array([t_cut]))[:, 0]
-        t_cut -= float(last.profile.s_of_t.x[i] - last.profile.s_of_t.x[0])
-        v_scale = float(np.sqrt(np.max(last.q)))
-        a_scale = float(np.max(np.abs(last.a)))
-        if (abs(v - start.v) > 1e-7 * (1.0 + v_scale)
-                or abs(a - start.a) > 1e-7 * (1.0 + a_scale)):
-            return None
-        if (abs(request.s_end - old.s_end) <= 1e-12 * max(abs(old.s_end), 1.0)
-                and request.v_end == old.v_end):
-            # the same end: the rest of the last plan is a solution, keep all its nodes
-            n_reuse = s.size - i
-        else:
-            # reuse nodes up to one top-feed braking distance before the nearer window end
-            # (there the last plan was already slowing down for its stop)
-            reach = self._reach(request, last.geo)
-            k = int(np.searchsorted(s, min(old.s_end, request.s_end) - reach, side="right")) - 1
-            n_reuse = max(k - i + 1, FIXED_NODES)
-            if i + n_reuse >= s.size or s[i + n_reuse - 1] >= request.s_end:
-                return None
-        if request.feed_cap is not None or old.feed_cap is not None:
-            nodes = s[i:i + n_reuse]
-            if (request.feed_cap is None or old.feed_cap is None
-                    or not np.array_equal(request.feed_cap.at(nodes), old.feed_cap.at(nodes))):
-                return None
-        return Seam(last, i, n_reuse, t_cut)
+        """The seam with the last plan if the request starts on it (`lp_seam.find_seam`)."""
+        return find_seam(self._last, request)
 
     def _plan(self, request: PlanRequest, fixed_head: np.ndarray | None,
-              seam: Seam | None) -> PlanResult:
+              seam: Seam | None, grid_step: float | None = None) -> PlanResult:
         """One plan: the grid (fresh, or continuing the seam's), the LP, the check/repair
         loop. Remembers the result as the last plan. A seam with the last plan's end is
         the rest of the last plan (verified already): no LP."""
-        if seam is not None and seam.first + seam.n_reuse == seam.last.geo.n_nodes:
+        if seam is not None and seam.reuses_all:
             return self._rest_of_last(seam)
         if seam is None:
-            s, stop_idx = self.grid(request)
+            s, stop_idx = self.grid(request, grid_step)
             geo = self.geometry(request.path, s)
             tight = Tightening.uniform(s.size, *self.margins)
             self._pretighten(request, geo, tight, stop_idx)
@@ -340,7 +289,7 @@ class LPPlanner:
             plan = self.solve_grid(request, geo, tight, stop_idx, head, start_q=plan.q,
                                    passes=1, start_envelope=seam is None)
             repairs += 1
-        a_end = 0.0 if request.v_end <= _REST else None
+        a_end = 0.0 if request.v_end <= REST else None
         self._last = LastPlan(request, geo, plan.q, node_accelerations(s, plan.q, a_start, a_end),
                               tight, stop_idx, full)
         info = {
@@ -404,11 +353,11 @@ class LPPlanner:
                                   & (last.stop_idx < seam.first + seam.n_reuse)] - seam.first
         h = self.grid_step or default_grid_step(request.path, request.limits)
         corners = self.corners(request.path)
-        if seam.first + seam.n_reuse == last.geo.n_nodes:  # the same end: no fresh nodes
+        if seam.reuses_all:  # the same end: no fresh nodes
             geo, stop_idx = last.geo.take(reused), old_stops
         else:
             s, stop_idx = extend_grid(last.geo.s[reused], float(request.s_end), h,
-                                      request.v_end <= _REST, corners, old_stops)
+                                      request.v_end <= REST, corners, old_stops)
             geo = GridGeometry.join(last.geo.take(reused),
                                     self.geometry(request.path, s[seam.n_reuse:]))
         tight = Tightening.uniform(geo.n_nodes, *self.margins)
@@ -418,14 +367,16 @@ class LPPlanner:
         self._pretighten(request, geo, tight, stop_idx, first_free=seam.n_reuse)
         return geo, stop_idx, tight
 
-    def grid(self, request: PlanRequest) -> tuple[np.ndarray, np.ndarray]:
-        """The nodes of the request's stretch and the indices of interior rest nodes."""
+    def grid(self, request: PlanRequest, grid_step: float | None = None
+             ) -> tuple[np.ndarray, np.ndarray]:
+        """The nodes of the request's stretch and the indices of interior rest nodes
+        (grid_step: node spacing, default the planner's)."""
         s0, s1 = float(request.start.s), float(request.s_end)
         if not s1 > s0:
             raise PlanningError(f"lp: s_end {s1} must exceed start.s {s0}")
-        h = self.grid_step or default_grid_step(request.path, request.limits)
+        h = grid_step or self.grid_step or default_grid_step(request.path, request.limits)
         corners = self.corners(request.path)
-        return build_grid(s0, s1, h, request.start.v <= _REST, request.v_end <= _REST, corners)
+        return build_grid(s0, s1, h, request.start.v <= REST, request.v_end <= REST, corners)
 
     def solve_grid(
         self,
@@ -456,9 +407,9 @@ class LPPlanner:
             q_lo[i] = val
             q_hi[i] = max(val, 0.0)
         base = [acceleration_rows(geo, lim.amax, tight.acc)]
-        if request.v_end > _REST:
+        if request.v_end > REST:
             base.append(end_acceleration_rows(geo, lim.amax, float(tight.acc[-1])))
-        if request.start.v > _REST and fixed_head is None:
+        if request.start.v > REST and fixed_head is None:
             base.append(start_slope_row(geo, request.start.a))
         weight = np.gradient(geo.s)
         plan = GridPlan(geo.s, np.zeros(geo.n_nodes), np.inf)
@@ -470,8 +421,8 @@ class LPPlanner:
             if q_star_head is not None:
                 q_star = np.concatenate([q_star_head, q_star[q_star_head.size:]])
         q_floor = 1e-6 * float(np.max(q_hi))
-        rest = [i for i, val in fixed.items() if val <= _REST**2]
-        if request.start.v > _REST and (q_star_head is None or not self.seam_jerk_change):
+        rest = [i for i, val in fixed.items() if val <= REST**2]
+        if request.start.v > REST and (q_star_head is None or not self.seam_jerk_change):
             # the moving start's own jerk is whatever its previous plan had: the
             # jerk-change regularizer there made replans from braking states infeasible
             # (not at a seam, whose head satisfies it: its own plan's rows)
@@ -484,6 +435,7 @@ class LPPlanner:
             q = self._solve(plan, weight, q_lo, q_hi, rows, geo.n_nodes, record=True)
             for i, val in fixed.items():  # exactly, not to the solver's rounding
                 q[i] = val
+            q = self._unstall(plan, weight, q, q_lo, q_hi, rows, fixed)
             t = grid_time(geo.s, q)
             plan.pass_times.append(t)
             if t >= best_t * (1.0 - 1e-4):
@@ -495,6 +447,34 @@ class LPPlanner:
         return plan
 
     # --- internals --------------------------------------------------------------------
+    def _unstall(self, plan: GridPlan, weight, q: np.ndarray, q_lo: np.ndarray,
+                 q_hi: np.ndarray, rows: list[Rows], fixed: dict[int, float]) -> np.ndarray:
+        """Re-solve if a free node got q = 0 (an unplanned stop; next to a rest node, an
+        interval that never ends). The objective sum(h q) hardly values the small q
+        near rest, and on short paths the linearized jerk rows made the LP trade them
+        for the middle (measured: 35-100 mm paths). The re-solve weighs each node by the
+        travel time its feed saves, h / q_hi^(3/2) (the gradient of sum h / sqrt(q) at
+        the upper bounds), which values the nodes near rest; only where that still
+        leaves zeros, their lower bound is raised to `stall_floor` times q_hi."""
+        tiny = 1e-9 * float(np.max(q_hi))
+        free = np.ones(q.size, dtype=bool)
+        free[list(fixed)] = False
+        if not np.any(free & (q <= tiny)):
+            return q
+        timed = weight / np.maximum(q_hi, tiny) ** 1.5
+        timed *= float(np.sum(weight)) / float(np.sum(timed))
+        floor = 0.0
+        for _ in range(3):
+            q = self._solve(plan, timed, q_lo, q_hi, rows, q.size, record=True)
+            for i, val in fixed.items():
+                q[i] = val
+            stalled = free & (q <= tiny)
+            if not np.any(stalled):
+                break
+            floor = min(2.0 * floor, 0.9) if floor else self.stall_floor
+            q_lo[stalled] = np.maximum(q_lo[stalled], floor * q_hi[stalled])
+        return q
+
     def _solve(self, plan: GridPlan, weight, q_lo, q_hi, rows: list[Rows], n: int,
                record: bool) -> np.ndarray:
         lp = ScaledLP.build(weight, q_lo, q_hi, free_rows(Rows.stack(rows, n), q_lo >= q_hi))
@@ -534,7 +514,7 @@ class LPPlanner:
         if include_start:
             Jn, An = factors(s[0])
             env = reachable_q(s - s[0], request.start.v, a0, Jn, max(An, a0 + 1e-6 * abs(a0)))
-        if request.v_end <= _REST:
+        if request.v_end <= REST:
             env = np.minimum(env, reachable_q(s[-1] - s, 0.0, 0.0, *factors(s[-1])))
         for i in stop_idx:
             env = np.minimum(env, reachable_q(np.abs(s - s[i]), 0.0, 0.0, *factors(s[i])))
@@ -551,7 +531,7 @@ class LPPlanner:
         if self.envelope_margin >= 1.0:
             return
         env = self._envelope(request, geo, tight, stop_idx,
-                             include_start=request.start.v <= _REST)
+                             include_start=request.start.v <= REST)
         zone = env < self._caps(request, geo, tight)
         if not np.any(zone):
             return
@@ -563,15 +543,8 @@ class LPPlanner:
         tight.jerk[grown] *= self.envelope_margin
 
     def _profile(self, request: PlanRequest, plan: GridPlan, a_start: float) -> FeedProfile:
-        a_end = 0.0 if request.v_end <= _REST else None
+        a_end = 0.0 if request.v_end <= REST else None
         return profile_from_grid(plan.s, plan.q, a_start, a_end)
-
-    @staticmethod
-    def _reach(request: PlanRequest, geo: GridGeometry) -> float:
-        """Braking distance from the top feed the velocity limits allow at the nodes."""
-        A, J = path_limits(request.path, request.limits)
-        return braking_distance(float(np.sqrt(np.max(velocity_caps(geo, request.limits.vmax)))),
-                                A, J)
 
     @staticmethod
     def _tighten(tight: Tightening, ratios: SampledRatios, profile: FeedProfile,
@@ -592,24 +565,3 @@ class LPPlanner:
                 per_node[sl] = np.minimum(per_node[sl], f)
             factors *= per_node
 
-
-def _same_limits(a: AxisLimits, b: AxisLimits) -> bool:
-    return (a is b) or (np.array_equal(a.vmax, b.vmax) and np.array_equal(a.amax, b.amax)
-                        and np.array_equal(a.jmax, b.jmax))
-
-
-def _time_at(profile: FeedProfile, piece: int, s: float) -> float | None:
-    """The time (from the profile's start) at which piece `piece` of s(t) passes s, or
-    None if it does not (the pieces are monotone: the feed is >= 0)."""
-    pp = profile.s_of_t
-    lo, hi = pp.x[piece], pp.x[piece + 1]
-    one = PPoly(pp.c[:, piece:piece + 1], pp.x[piece:piece + 2], extrapolate=False)
-    roots = one.solve(s, discontinuity=False, extrapolate=False)
-    roots = roots[np.isfinite(roots)]
-    if roots.size == 0:
-        ends = np.array([lo, hi])
-        k = int(np.argmin(np.abs(one(ends) - s)))
-        if abs(float(one(ends[k])) - s) > 1e-9 * max(abs(s), 1.0):
-            return None
-        roots = ends[k:k + 1]
-    return float(roots[0] - pp.x[0])

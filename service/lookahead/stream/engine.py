@@ -344,7 +344,7 @@ class Engine:
         """Plan [start.s, s_end] anchored at k_plan; keep the old plan if it fails."""
         request = self._request(job, start, s_end)
         try:
-            plan = self._plan_with_fallback(request, k_plan, job.tail)
+            plan = self._plan_with_fallback(request, k_plan, job.tail, job.plan)
         except (PlanningError, ValueError, RuntimeError, ArithmeticError) as exc:
             self.replan_failures += 1
             job.last_fail = k_plan
@@ -359,17 +359,18 @@ class Engine:
         self.plan_ms = plan.compute_s * 1e3
         return True
 
-    def _plan_with_fallback(self, request: PlanRequest, k_plan: int, tail: np.ndarray
-                            ) -> CommittedPlan:
-        """The configured planner's checked plan, else the stop planner's (same request)."""
+    def _plan_with_fallback(self, request: PlanRequest, k_plan: int, tail: np.ndarray,
+                            previous: CommittedPlan | None = None) -> CommittedPlan:
+        """The configured planner's checked plan, else the stop planner's (same request);
+        `previous` (the plan in force) lends its verified samples where a plan equals it."""
         try:
-            return plan_checked(self.planner, request, k_plan, tail, self.limits)
+            return plan_checked(self.planner, request, k_plan, tail, self.limits, previous)
         except (PlanningError, ValueError, RuntimeError, ArithmeticError) as exc:
             if self.stop_planner is self.planner:
                 raise
             log.info("%s failed at k=%d (%s); falling back to %s", self.planner.name, k_plan,
                      exc, self.stop_planner.name)
-        plan = plan_checked(self.stop_planner, request, k_plan, tail, self.limits)
+        plan = plan_checked(self.stop_planner, request, k_plan, tail, self.limits, previous)
         self.fallbacks += 1
         return plan
 
@@ -472,6 +473,7 @@ class Engine:
         if cmd.verb == "override":
             assert cmd.value is not None
             self.override = float(cmd.value)
+            self._forget_plans()
             if job is not None:
                 job.override_pending = True
             return CommandReply(True)
@@ -605,7 +607,16 @@ class Engine:
                    duration_s=max(job.k - 1, 0) * self.dt, **extra)
         self._drop(job)
 
+    def _forget_plans(self) -> None:
+        """Tell planners that keep their last plan (the LP's seams) that it is void."""
+        for planner in (self.planner, self.stop_planner):
+            forget = getattr(planner, "forget", None)
+            if callable(forget):
+                forget()
+
     def _drop(self, job: _Job, outcome: str = "has already finished") -> None:
+        if self._active is job:
+            self._forget_plans()
         self._jobs.pop(job.id, None)
         self._done[job.id] = outcome
         while len(self._done) > MAX_DONE:

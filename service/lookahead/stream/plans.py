@@ -8,7 +8,7 @@ anchors a `FeedProfile` at sample `k_plan` (profile time 0): sample k lies at pr
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.interpolate import PPoly
@@ -41,6 +41,9 @@ class CommittedPlan:
     k_end: int
     compute_s: float
     method: str
+    #: samples k = cache_k0, cache_k0 + 1, ... computed once (`with_samples`)
+    cache: Samples | None = field(default=None, compare=False, repr=False)
+    cache_k0: int = 0
 
     @classmethod
     def anchor(cls, path: Path, result: PlanResult, k_plan: int, dt: float) -> CommittedPlan:
@@ -53,8 +56,46 @@ class CommittedPlan:
         return (np.asarray(ks, dtype=float) - self.k_plan) * dt
 
     def samples(self, k0: int, n: int, dt: float) -> Samples:
-        """Axis pos/vel/acc of samples k0 .. k0+n-1."""
+        """Axis pos/vel/acc of samples k0 .. k0+n-1 (from the cache where it has them)."""
+        c = self.cache
+        if c is not None and self.cache_k0 <= k0 and k0 + n <= self.cache_k0 + len(c):
+            sl = slice(k0 - self.cache_k0, k0 - self.cache_k0 + n)
+            return Samples(c.pos[sl], c.vel[sl], c.acc[sl])
         return sample_profile(self.path, self.profile, self.times(np.arange(k0, k0 + n), dt))
+
+    def with_samples(self, dt: float, previous: CommittedPlan | None = None
+                     ) -> tuple[CommittedPlan, int]:
+        """This plan with its samples k_plan+1 .. k_end+3 computed once (the verification
+        and every batch slice them; sampling 10 at a time cost ~2 ms per batch), and the
+        first sample k_new that is not `previous`'s.
+
+        Where this plan's path state (s, v, a) equals the cached `previous` plan's at the
+        same samples (to rounding: a replan that continues its last plan, the LP's seams),
+        those samples are the previous plan's, verified already; only samples from k_new
+        on are computed."""
+        ks = np.arange(self.k_plan + 1, self.k_end + 4)
+        k_new = int(ks[0])
+        old = previous.cache if previous is not None else None
+        if old is not None:
+            lo = max(k_new, previous.cache_k0)
+            hi = min(int(ks[-1]) + 1, previous.cache_k0 + len(old), previous.k_end)
+            if hi > lo:
+                mine = self.profile.at(self.times(np.arange(lo, hi), dt))[:3]
+                theirs = previous.profile.at(previous.times(np.arange(lo, hi), dt))[:3]
+                tol = np.array([S_TOL * max(float(np.max(np.abs(theirs[0]))), 1.0),
+                                1e-9 * (1.0 + float(np.max(np.abs(theirs[1])))),
+                                1e-9 * (1.0 + float(np.max(np.abs(theirs[2]))))])
+                same = np.all(np.abs(mine - theirs) <= tol[:, None], axis=0)
+                if lo == k_new:
+                    k_new = lo + (int(np.argmin(same)) if not np.all(same) else same.size)
+        fresh = sample_profile(self.path, self.profile, self.times(np.arange(k_new, ks[-1] + 1),
+                                                                   dt))
+        if k_new > ks[0]:
+            assert old is not None and previous is not None
+            kept = slice(int(ks[0]) - previous.cache_k0, k_new - previous.cache_k0)
+            fresh = Samples(*(np.vstack([getattr(old, f)[kept], getattr(fresh, f)])
+                              for f in ("pos", "vel", "acc")))
+        return replace(self, cache=fresh, cache_k0=int(ks[0])), k_new
 
     def state(self, k: int, dt: float) -> PathState:
         """Path state (s, ds/dt, d2s/dt2) at sample k (end state from k_end on)."""
@@ -74,13 +115,20 @@ def rest_plan(path: Path, s: float, k: int) -> CommittedPlan:
     return CommittedPlan(path, FeedProfile(pp), k, s, k, 0.0, "rest")
 
 
-def verify(plan: CommittedPlan, tail: np.ndarray, limits: AxisLimits, dt: float) -> str | None:
+def verify(plan: CommittedPlan, tail: np.ndarray, limits: AxisLimits, dt: float,
+           k_new: int | None = None) -> str | None:
     """None if the published `tail` (last <= 3 positions) followed by the plan's samples
-    up to rest passes the finite-difference checker at `limits`, else what failed."""
+    up to rest passes the finite-difference checker at `limits`, else what failed.
+
+    k_new: samples before it were verified already (`CommittedPlan.with_samples`): only
+    the samples from k_new on are checked, with the 3 positions before them."""
     n = plan.k_end - plan.k_plan + 3
     pos = plan.samples(plan.k_plan + 1, n, dt).pos
     if tail.size:
         pos = np.vstack([tail, pos])
+    if k_new is not None:
+        first = pos.shape[0] - n + (k_new - plan.k_plan - 1)
+        pos = pos[max(first - 3, 0):]
     report = check_positions(pos, limits, dt)
     if report.ok:
         return None
@@ -88,18 +136,21 @@ def verify(plan: CommittedPlan, tail: np.ndarray, limits: AxisLimits, dt: float)
 
 
 def plan_checked(planner: Planner, request: PlanRequest, k_plan: int, tail: np.ndarray,
-                 check_limits: AxisLimits) -> CommittedPlan:
+                 check_limits: AxisLimits, previous: CommittedPlan | None = None
+                 ) -> CommittedPlan:
     """Plan, anchor at k_plan and verify against the published tail; PlanningError if the
-    planner fails, reports an unverified profile, misses the window or breaks a limit."""
+    planner fails, reports an unverified profile, misses the window or breaks a limit.
+    previous: the plan in force (its samples are reused where the new plan equals it)."""
     result = planner.plan(request)
     if result.info.get("verified") is False:
         raise PlanningError(f"{planner.name}: profile not verified ({result.info})")
-    plan = CommittedPlan.anchor(request.path, result, k_plan, request.dt)
+    plan, k_new = CommittedPlan.anchor(request.path, result, k_plan, request.dt).with_samples(
+        request.dt, previous)
     tol = S_TOL * max(request.path.length, 1.0)
     if abs(plan.s_end - request.s_end) > 1e3 * tol:
         raise PlanningError(f"{planner.name}: profile ends at s={plan.s_end:.9g}, "
                             f"not at the window end {request.s_end:.9g}")
-    problem = verify(plan, tail, check_limits, request.dt)
+    problem = verify(plan, tail, check_limits, request.dt, k_new)
     if problem:
         raise PlanningError(f"{planner.name}: {problem}")
     return plan
