@@ -60,9 +60,9 @@ def run_chain(path, limits, dt, n_replans: int, seed: int):
 
 
 def _shifted(profile, t: float):
-    from lookahead.planning.grid_profile import profile_from
+    from lookahead.planning.profile_ops import slice_profile
 
-    return profile_from(profile, t)
+    return slice_profile(profile, t)
 
 
 def test_hundred_replans_on_previous_plans_all_continue_and_pass_the_checker(setup):

@@ -125,28 +125,3 @@ def grid_time(s: np.ndarray, q: np.ndarray) -> float:
         return float(np.sum(np.where(vsum > 0, 2.0 * np.diff(s) / vsum, np.inf)))
 
 
-def profile_from(profile: FeedProfile, t: float) -> FeedProfile:
-    """The rest of `profile` from time t (relative to its start) on, as a profile starting
-    at time 0: the piece containing t is re-expanded about t (Taylor coefficients
-    p^(m)(tau) / m!, exact to rounding), the later pieces are kept as they are."""
-    pp = profile.s_of_t
-    t_abs = pp.x[0] + t
-    k = int(np.clip(np.searchsorted(pp.x, t_abs, side="right") - 1, 0, pp.x.size - 2))
-    tau = t_abs - pp.x[k]
-    c = pp.c[:, k]
-    degree = c.size - 1
-    first = np.zeros(degree + 1)
-    factorial = 1.0
-    for m in range(degree + 1):
-        factorial *= max(m, 1)
-        first[degree - m] = np.polyval(np.polyder(c, m), tau) / factorial if m < c.size else 0.0
-    coeffs = np.concatenate([first[:, None], pp.c[:, k + 1:]], axis=1)
-    x = np.concatenate([[0.0], pp.x[k + 1:] - t_abs])
-    return FeedProfile(PPoly(coeffs, x, extrapolate=False))
-
-
-def join_profiles(head: FeedProfile, tail: FeedProfile) -> FeedProfile:
-    """`tail` played after `head` (it starts where head ends); same polynomial degree."""
-    a, b = head.s_of_t, tail.s_of_t
-    x = np.concatenate([a.x, a.x[-1] + (b.x[1:] - b.x[0])]) - a.x[0]
-    return FeedProfile(PPoly(np.concatenate([a.c, b.c], axis=1), x, extrapolate=False))

@@ -22,7 +22,6 @@ from lookahead.planning.base import FeedProfile, PlanningError, PlanRequest, Pla
 from lookahead.planning.grid_profile import (
     grid_time,
     node_accelerations,
-    profile_from,
     profile_from_grid,
 )
 from lookahead.planning.lp_envelope import braking_distance, path_limits, reachable_q
@@ -47,6 +46,7 @@ from lookahead.planning.lp_seam import (
     join_last,
 )
 from lookahead.planning.lp_solve import ScaledLP, make_backend
+from lookahead.planning.profile_ops import slice_profile
 from lookahead.planning.sampled_check import SampledRatios, analytic_ratios
 
 
@@ -234,7 +234,7 @@ class LPPlanner:
         info = dict(sub.info)
         info["seam"] = {"reused_nodes": seam.n_reuse, "t_cut": seam.t_cut, "frozen": j0 - i}
         info["grid_s"], info["grid_q"] = self._last.geo.s, self._last.q
-        return PlanResult(profile_from(full, seam.t_cut), self.name, 0.0, info)
+        return PlanResult(slice_profile(full, seam.t_cut), self.name, 0.0, info)
 
     def forget(self) -> None:
         """Drop the last plan (the next request is planned from scratch)."""
@@ -269,7 +269,7 @@ class LPPlanner:
         worst = float("nan")
         while True:
             full = self._profile(request, plan, a_start)
-            profile = profile_from(full, t_cut) if t_cut > 0.0 else full
+            profile = slice_profile(full, t_cut) if t_cut > 0.0 else full
             if not self.verify:
                 break
             ratios = analytic_ratios(request.path, profile, request.limits, geo,
@@ -311,7 +311,7 @@ class LPPlanner:
     def _rest_of_last(seam: Seam) -> PlanResult:
         last = seam.last
         x = last.profile.s_of_t.x
-        profile = profile_from(last.profile, float(x[seam.first] - x[0]) + seam.t_cut)
+        profile = slice_profile(last.profile, float(x[seam.first] - x[0]) + seam.t_cut)
         info = {"seam": {"reused_nodes": seam.n_reuse, "t_cut": seam.t_cut, "solved": False},
                 "nodes": seam.n_reuse, "repairs": 0, "grid_s": last.geo.s[seam.first:],
                 "grid_q": last.q[seam.first:]}

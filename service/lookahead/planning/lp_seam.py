@@ -20,9 +20,9 @@ from scipy.interpolate import PPoly
 from lookahead.geometry.base import Path
 from lookahead.limits import AxisLimits
 from lookahead.planning.base import FeedProfile, PlanRequest
-from lookahead.planning.grid_profile import join_profiles
 from lookahead.planning.lp_envelope import braking_distance, path_limits
 from lookahead.planning.lp_rows import GridGeometry, velocity_caps
+from lookahead.planning.profile_ops import concatenate
 
 if TYPE_CHECKING:
     from lookahead.planning.lp import Tightening
@@ -161,7 +161,7 @@ def join_last(last: LastPlan, first: int, stop: int, tail: LastPlan,
         request, GridGeometry.join(last.geo.take(kept), tail.geo),
         np.concatenate([last.q[kept], tail.q]), np.concatenate([last.a[kept], tail.a]),
         tight, np.concatenate([old_stops, tail.stop_idx + (stop - first)]).astype(int),
-        join_profiles(head, tail.profile))
+        concatenate([head, tail.profile]))
 
 
 def same_limits(a: AxisLimits, b: AxisLimits) -> bool:
