@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from lookahead.checker import check_positions
@@ -119,10 +119,6 @@ def test_random_wandering_paths_pass_checker(seed, limit_scale, npts, reversals,
     dc = np.where(back, rng.uniform(0.1, 2.0, npts), rng.normal(size=npts) * 30.0)
     points = np.cumsum(np.vstack([[0.0, 0.0], np.c_[dx, dc]]), axis=0)
     path = fit_points(points, SCALE, "cubic")
-    # Where the arc-length table did not converge (its quadrature split hit the cap), the
-    # sampler's x(s) carries ~1e-7 mm of noise, which alone moves the finite-difference
-    # jerk by ~1e3 unit/s^3: the judge itself would be off, so such paths are skipped.
-    assume(path.interval_lengths[1].max() < 256)
     limits = AxisLimits(LIMITS.vmax * limit_scale, LIMITS.amax * limit_scale,
                         LIMITS.jmax * limit_scale)
     request = PlanRequest(path, limits, PathState(0.0), path.length, dt=DT)

@@ -14,7 +14,14 @@ import numpy as np
 from scipy.interpolate import BSpline
 
 from lookahead.geometry.base import Path
-from lookahead.geometry.piecewise import CORNER_TOL_RAD, PiecewisePath, ppoly_from_bspline
+from lookahead.geometry.piecewise import (
+    CORNER_TOL_RAD,
+    PathEnds,
+    PiecewisePath,
+    path_ends,
+    ppoly_from_bspline,
+    tangent_angle,
+)
 
 MAX_DEGREE = 5
 
@@ -130,8 +137,10 @@ class CompositePath(Path):
     """Paths concatenated end to end. The composite parameter u runs through the pieces'
     parameter ranges laid end to end; s is the sum of the pieces' arc lengths.
 
-    Junctions whose unit tangents differ by more than `corner_tol_rad` are corners.
+    Junctions whose unit tangents differ by more than `corner_tol_rad`, or where either
+    side's ds/du nearly vanishes (a cusp, `PathEnds.cusp`), are corners.
     `join_tol` (relative to the axis range) bounds the position gap at a junction.
+    Building is O(pieces) numpy on the pieces' cached `ends()` (pieces are immutable).
     """
 
     def __init__(
@@ -152,15 +161,20 @@ class CompositePath(Path):
         spans = np.array([p.u_range[1] - p.u_range[0] for p in self.pieces])
         self._u_off = np.concatenate([[0.0], np.cumsum(spans)])
         self._s_off = np.concatenate([[0.0], np.cumsum([p.length for p in self.pieces])])
-        self._ends = [(p.eval_s(np.array([0.0]), 2)[:, 0], p.eval_s(np.array([p.length]), 2)[:, 0])
-                      for p in self.pieces]
-        starts = np.array([e[0][0] for e in self._ends])
-        stops = np.array([e[1][0] for e in self._ends])
+        ends = [path_ends(p) for p in self.pieces]
+        # (2 ends, pieces, ...) stacks of the pieces' start and end geometry
+        self._end_x, self._end_xs, self._end_xss = (
+            np.stack([getattr(e, f) for e in ends], axis=1) for f in ("x", "xs", "xss"))
+        self._end_cusp = np.stack([e.cusp for e in ends], axis=1)
+        starts, stops = self._end_x
         span = np.ptp(np.vstack([starts, stops]), axis=0)
-        for i in range(1, len(self.pieces)):
-            gap = np.abs(starts[i] - stops[i - 1])
-            if np.any(gap > join_tol * np.maximum(span, 1.0)):
-                raise ValueError(f"pieces[{i}]: starts {gap.max():.3g} away from the previous end")
+        gap = np.abs(starts[1:] - stops[:-1])
+        bad = np.flatnonzero(np.any(gap > join_tol * np.maximum(span, 1.0), axis=1))
+        if bad.size:
+            i = int(bad[0]) + 1
+            raise ValueError(f"pieces[{i}]: starts {gap[i - 1].max():.3g} away from the "
+                             "previous end")
+        self._ends_cache: PathEnds | None = None
 
     @property
     def length(self) -> float:
@@ -207,18 +221,24 @@ class CompositePath(Path):
         parts = [p.breakpoints_s() + off for p, off in zip(self.pieces, self._s_off, strict=False)]
         return np.unique(np.concatenate(parts))
 
+    def ends(self) -> PathEnds:
+        """The geometry at both ends: the first piece's start, the last piece's end."""
+        if self._ends_cache is None:
+            first, last = path_ends(self.pieces[0]), path_ends(self.pieces[-1])
+            self._ends_cache = PathEnds(
+                *(np.stack([getattr(first, f)[0], getattr(last, f)[1]])
+                  for f in ("x", "xs", "xss", "sigma")),
+                mean_speed=self.length / max(self.u_range[1], 1e-300))
+        return self._ends_cache
+
     def _junctions(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(s, is_corner, |jump of x_ss| per axis) at each junction between pieces."""
         s = self._s_off[1:-1]
-        corner = np.zeros(s.size, dtype=bool)
-        jumps = np.zeros((s.size, self.naxes))
-        for j in range(s.size):
-            left, right = self._ends[j][1], self._ends[j + 1][0]
-            cos = float(np.dot(left[1] * self.path_scale, right[1] * self.path_scale))
-            cos /= max(float(np.linalg.norm(left[1] * self.path_scale)
-                             * np.linalg.norm(right[1] * self.path_scale)), 1e-300)
-            corner[j] = np.arccos(np.clip(cos, -1.0, 1.0)) > self.corner_tol_rad
-            jumps[j] = np.abs(right[2] - left[2])
+        left, right = self._end_xs[1, :-1], self._end_xs[0, 1:]
+        corner = (self._end_cusp[1, :-1] | self._end_cusp[0, 1:]
+                  | (tangent_angle(left, right, self.path_scale) > self.corner_tol_rad))
+        with np.errstate(invalid="ignore"):  # inf - inf at cusps, which are corners
+            jumps = np.abs(self._end_xss[0, 1:] - self._end_xss[1, :-1])
         return s, corner, jumps
 
     def corners_s(self) -> np.ndarray:
@@ -241,7 +261,8 @@ class CompositePath(Path):
 
     def continuity(self) -> int:
         _, corner, jumps = self._junctions()
-        scale = max((np.max(np.abs(e[k][2])) for e in self._ends for k in (0, 1)), default=0.0)
+        xss = self._end_xss[~self._end_cusp]
+        scale = float(np.max(np.abs(xss))) if xss.size else 0.0
         smooth = np.all(jumps[~corner] <= 1e-8 * (scale + 1.0 / max(self.length, 1e-300)))
         return min([p.continuity() for p in self.pieces] + [2 if smooth else 1])
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import CubicSpline, PchipInterpolator, PPoly
 
+from lookahead.geometry.arclength import Leaves
 from lookahead.geometry.piecewise import PiecewisePath
 
 FIT_METHODS = ("cubic", "pchip")
@@ -18,7 +19,7 @@ class SplinePath(PiecewisePath):
     """x(u) given as a scipy PPoly with values of shape (naxes,), u over its breakpoints.
 
     `continuity` is declared by the caller (2 for a cubic spline, 1 for pchip).
-    `lengths`/`split` optionally reuse already integrated interval lengths.
+    `leaves` optionally reuses already integrated arc-length leaves (`PiecewisePath.leaves`).
     """
 
     def __init__(
@@ -26,10 +27,9 @@ class SplinePath(PiecewisePath):
         pp: PPoly,
         path_scale: np.ndarray,
         continuity: int = 2,
-        lengths: np.ndarray | None = None,
-        split: np.ndarray | None = None,
+        leaves: Leaves | None = None,
     ) -> None:
-        super().__init__(pp, path_scale, continuity=continuity, lengths=lengths, split=split)
+        super().__init__(pp, path_scale, continuity=continuity, leaves=leaves)
 
 
 def validate_points(points: np.ndarray, naxes: int, what: str = "points") -> np.ndarray:

@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import BSpline, PchipInterpolator, PPoly, make_interp_spline
 
+from lookahead.geometry.arclength import Leaves
 from lookahead.geometry.base import Path
 from lookahead.geometry.piecewise import ppoly_from_bspline
 from lookahead.geometry.spline_path import FIT_METHODS, SplinePath, validate_points
@@ -90,8 +91,10 @@ class StreamingFit:
         self._pts = _Buffer((self.naxes,))
         self._ctrl = _Buffer((self.naxes,))  # final B-spline control points (cubic)
         self._coef = _Buffer((4, self.naxes), axis=1)  # final pieces, PPoly layout
-        self._lengths = _Buffer(())
-        self._split = _Buffer((), dtype=int)
+        # arc-length quadrature leaves of the final pieces (`arclength.Leaves`)
+        self._leaf_start = _Buffer(())
+        self._leaf_length = _Buffer(())
+        self._leaf_count = _Buffer((), dtype=int)
         self._s_final = 0.0
         self._path: Path | None = None
 
@@ -183,15 +186,22 @@ class StreamingFit:
         return ppoly_from_bspline(spline)
 
     def _append_final_pieces(self, k1: int) -> None:
-        k0 = self._lengths.size
+        k0 = self._leaf_count.size
         if k1 <= k0:
             return
         pp = self._pieces(k0, k1)
-        lengths, split = SplinePath(pp, self.path_scale).interval_lengths
         self._coef.append(pp.c)
-        self._lengths.append(lengths)
-        self._split.append(split)
-        self._s_final = float(np.cumsum(np.concatenate([[self._s_final], lengths]))[-1])
+        self._append_final_leaves(SplinePath(pp, self.path_scale).leaves)
+
+    def _append_final_leaves(self, leaves: Leaves) -> None:
+        self._leaf_start.append(leaves.start)
+        self._leaf_length.append(leaves.length)
+        self._leaf_count.append(leaves.count)
+        # continues the path's own sequential cumsum: bit-identical to its s at the knot
+        self._s_final = float(np.cumsum(np.concatenate([[self._s_final], leaves.length]))[-1])
+
+    def _final_leaves(self) -> Leaves:
+        return Leaves(self._leaf_start.view(), self._leaf_length.view(), self._leaf_count.view())
 
     # --- output -----------------------------------------------------------------------
     @property
@@ -207,17 +217,15 @@ class StreamingFit:
         n = self._u.size - 1
         if n < 1:
             raise ValueError("points: need at least 2 distinct points for a path")
-        k0 = self._lengths.size
-        coef, lengths, split = self._coef.view(), self._lengths.view(), self._split.view()
+        k0 = self._leaf_count.size
+        coef, leaves = self._coef.view(), self._final_leaves()
         if k0 < n:
             tail = self._tail_pieces(k0, n)
-            tail_lengths, tail_split = SplinePath(tail, self.path_scale).interval_lengths
             coef = np.concatenate([coef, tail.c], axis=1)
-            lengths = np.concatenate([lengths, tail_lengths])
-            split = np.concatenate([split, tail_split])
+            leaves = Leaves.concat([leaves, SplinePath(tail, self.path_scale).leaves])
         pp = PPoly(coef, self._u.view(), extrapolate=True)
         continuity = 2 if self.method == "cubic" else 1
-        self._path = SplinePath(pp, self.path_scale, continuity, lengths=lengths, split=split)
+        self._path = SplinePath(pp, self.path_scale, continuity, leaves=leaves)
         return self._path
 
     def _tail_pieces(self, k0: int, n: int) -> PPoly:
@@ -234,12 +242,10 @@ class StreamingFit:
         path = self.path()
         if not self._finished:
             n = self._u.size - 1
-            k0 = self._lengths.size
+            k0 = self._leaf_count.size
             if k0 < n:
                 self._coef.append(path.pp.c[:, k0:])
-                lengths, split = path.interval_lengths
-                self._lengths.append(lengths[k0:])
-                self._split.append(split[k0:])
+                self._append_final_leaves(path.leaves.intervals(k0))
                 self._s_final = path.length
             self._finished = True
         return path
