@@ -236,7 +236,28 @@ def build_grid(path: Path, s_begin: float, s_end: float, dt: float, limits: Axis
     corner_after = np.zeros(ncell, dtype=bool)
     if corners.size:
         corner_after[np.searchsorted(edges, corners - pad) - 1] = True
+        corner_before = np.zeros(ncell, dtype=bool)
+        corner_before[np.searchsorted(edges, corners - pad)] = True
+        _retreat_from_corners(s, xs, xss, xsss, corner_before, corner_after)
     return PathGrid(edges, s, xs, xss, xsss, jerk_scale, c1_cap, corner_after)
+
+
+def _retreat_from_corners(s: np.ndarray, xs: np.ndarray, xss: np.ndarray, xsss: np.ndarray,
+                          corner_before: np.ndarray, corner_after: np.ndarray) -> None:
+    """In place: a cell touching a corner takes its corner-side budget point from the
+    check point a quarter cell away from the corner (index 3 for a corner at the cell's
+    start, 4 for one at its end).
+
+    The machine comes to rest at a corner, so the feed there is 0 whatever the geometry;
+    but at a cusp x_ss ~ d^-1/2 and x_sss ~ d^-3/2 at distance d from it (worse still in
+    floating point, by cancellation in the chain rule), and a budget point 1e-7 of a cell
+    from the corner would cap the whole cell at a crawl. In the last quarter cell the stop
+    itself keeps the axis terms small (v ~ d^2/3 in a jerk-limited stop, so x_sss v^3 and
+    x_ss v^2 vanish as d -> 0); the planner still verifies the quarter point, and the
+    finite-difference checker judges the rest."""
+    for cells, budget, check in ((corner_before, 0, 3), (corner_after, 2, 4)):
+        for x in (s, xs, xss, xsss):
+            x[cells, budget] = x[cells, check]
 
 
 def _u_of_nodes(path: Path, nodes: np.ndarray) -> np.ndarray:
