@@ -14,3 +14,10 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if "slow" in item.keywords:
             item.add_marker(skip)
+
+
+@pytest.fixture(autouse=True)
+def _no_lookahead_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Tests see the built-in configuration, whatever LOOKAHEAD_* the shell has set."""
+    for var in [v for v in os.environ if v.startswith("LOOKAHEAD_") and v != "LOOKAHEAD_SLOW"]:
+        monkeypatch.delenv(var)

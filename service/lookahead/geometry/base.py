@@ -82,22 +82,24 @@ class Path(ABC):
 def arc_length_derivatives(d: np.ndarray, path_scale: np.ndarray
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """sigma = ds/du (n,) and x_s, x_ss, x_sss (each (n, naxes)) from the u-derivatives
-    d = path.eval_u(u, 3) (shape (4, n, naxes)): the chain rule through u(s), for callers
-    that hold u and so skip the arc-length inversion.
+    d[1:4] = x_u, x_uu, x_uuu (each (n, naxes); d[0], the position, is not used): the chain
+    rule through u(s), for callers that hold u and so skip the arc-length inversion.
 
     With sigma(u) = ||path_scale * x_u||: u_s = 1/sigma, u_ss = -sigma_u / sigma^3,
     u_sss = (3 sigma_u^2 - sigma sigma_uu) / sigma^5.
     """
-    w = np.asarray(path_scale, dtype=float) ** 2
     xu, xuu, xuuu = d[1], d[2], d[3]
-    sigma = np.maximum(np.sqrt(np.sum(w * xu * xu, axis=-1)), np.finfo(float).tiny)
-    sigma_u = np.sum(w * xu * xuu, axis=-1) / sigma
-    sigma_uu = (np.sum(w * xuu * xuu, axis=-1) + np.sum(w * xu * xuuu, axis=-1)
-                - sigma_u**2) / sigma
+    # weighted sums over the few axes as matrix-vector products, reciprocals reused: half
+    # the time of axis-wise sums and divisions on the 10^5 points of a long job
+    w = np.asarray(path_scale, dtype=float) ** 2
+    sigma = np.maximum(np.sqrt((xu * xu) @ w), np.finfo(float).tiny)
     us = 1.0 / sigma
-    uss = -sigma_u / sigma**3
-    usss = (3.0 * sigma_u**2 - sigma * sigma_uu) / sigma**5
+    sigma_u = ((xu * xuu) @ w) * us
+    sigma_uu = ((xuu * xuu) @ w + (xu * xuuu) @ w - sigma_u * sigma_u) * us
+    us2 = us * us
+    uss = -sigma_u * us2 * us
+    usss = (3.0 * sigma_u * sigma_u - sigma * sigma_uu) * (us2 * us2 * us)
     xs = xu * us[:, None]
-    xss = xuu * (us**2)[:, None] + xu * uss[:, None]
-    xsss = xuuu * (us**3)[:, None] + 3.0 * xuu * (us * uss)[:, None] + xu * usss[:, None]
+    xss = xuu * us2[:, None] + xu * uss[:, None]
+    xsss = xuuu * (us2 * us)[:, None] + xuu * (3.0 * us * uss)[:, None] + xu * usss[:, None]
     return sigma, xs, xss, xsss
