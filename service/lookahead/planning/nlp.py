@@ -52,6 +52,7 @@ from lookahead.planning.base import (
 from lookahead.planning.grid_profile import interval_durations, quintic_coefficients
 from lookahead.planning.lp_envelope import braking_distance, path_limits
 from lookahead.planning.profile_ops import concatenate, slice_profile
+from lookahead.planning.sampled_check import SampledRatios
 from lookahead.sampling import sample_plan
 
 _REST = 1e-9  # feeds below this (path units / s) count as rest
@@ -216,7 +217,7 @@ class PointMargins:
     def uniform(cls, s: np.ndarray, m: Margins) -> PointMargins:
         return cls(s, *(np.full(s.size, f) for f in (m.vel, m.acc, m.jerk)))
 
-    def tighten(self, peaks: WindowPeaks, s_at, radius: float) -> None:
+    def tighten(self, peaks: SampledRatios, s_at, radius: float) -> None:
         """Scale the margins down within `radius` of every place a limit was exceeded."""
         for kind in ("vel", "acc", "jerk"):
             ratio, t_at = getattr(peaks, kind), getattr(peaks, "t_" + kind)
@@ -563,25 +564,8 @@ class NLPPlanner:
         return hermite_profile(nodes, v, a)
 
 
-@dataclass(frozen=True)
-class WindowPeaks:
-    """Finite-difference |value| / limit (worst axis) of a window's samples, and their
-    times (s from the window's start)."""
-
-    vel: np.ndarray
-    acc: np.ndarray
-    jerk: np.ndarray
-    t_vel: np.ndarray
-    t_acc: np.ndarray
-    t_jerk: np.ndarray
-
-    @property
-    def worst(self) -> float:
-        return float(max(np.max(x, initial=0.0) for x in (self.vel, self.acc, self.jerk)))
-
-
 def window_peaks(path: Path, profile: FeedProfile, limits: AxisLimits, dt: float,
-                 hold: bool, phases: int = 4) -> WindowPeaks:
+                 hold: bool, phases: int = 4) -> SampledRatios:
     """The checker's differences (PROTOCOL.md "Limits") of one window at `phases` sampling
     phases (a window starts at an arbitrary phase of the job's dt grid). Only samples inside
     the window count, except that a window ending at rest holds its end state for 3 samples;
@@ -597,7 +581,7 @@ def window_peaks(path: Path, profile: FeedProfile, limits: AxisLimits, dt: float
             d = d[phases:] - d[:-phases]
         out.append((np.max(np.abs(d) / dt**order / lim, axis=1) if len(d) else np.zeros(0),
                     np.arange(len(d)) * step + 0.5 * order * dt))
-    return WindowPeaks(out[0][0], out[1][0], out[2][0], out[0][1], out[1][1], out[2][1])
+    return SampledRatios(out[0][0], out[1][0], out[2][0], out[0][1], out[1][1], out[2][1])
 
 
 # --- profiles ---------------------------------------------------------------------------
