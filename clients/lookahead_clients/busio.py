@@ -15,6 +15,8 @@ from typing import NamedTuple
 
 import zenoh
 
+from lookahead.bus import poll_fifo
+
 FIFO_CAPACITY = 8192
 
 
@@ -34,8 +36,6 @@ def _kind(sample: zenoh.Sample, liveliness: bool) -> str:
     return "put" if put else "delete"
 
 
-#: poll interval of an empty channel (s)
-POLL_S = 0.002
 #: drain threads by the id of the session they read from
 _drains: dict[int, list[tuple[threading.Event, threading.Thread]]] = {}
 
@@ -48,15 +48,13 @@ def drain(sub, out: queue.Queue, liveliness: bool = False, session=None) -> thre
     registered for that session first."""
     stop = threading.Event()
 
+    def put(sample: zenoh.Sample) -> None:
+        out.put(Arrival(_kind(sample, liveliness), time.monotonic(), str(sample.key_expr),
+                        sample.payload.to_bytes()))
+
     def loop() -> None:
         try:
-            while not stop.is_set():
-                sample = sub.try_recv()
-                if sample is None:
-                    time.sleep(POLL_S)
-                    continue
-                out.put(Arrival(_kind(sample, liveliness), time.monotonic(),
-                                str(sample.key_expr), sample.payload.to_bytes()))
+            poll_fifo(sub, put, stop)
         except zenoh.ZError:
             return  # the session closed
 

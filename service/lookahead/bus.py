@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import json
 import socket
-from collections.abc import Sequence
+import threading
+import time
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 from lookahead.config import ZenohSection
@@ -84,3 +86,21 @@ def with_endpoints(section: ZenohSection, listen: Sequence[str] | None = None,
     if connect is not None:
         out = replace(out, connect=tuple(connect))
     return out
+
+
+#: how long a drain loop sleeps when its channel is empty (s)
+POLL_IDLE_S = 0.002
+
+
+def poll_fifo(sub, handle: Callable[[object], None], stop: threading.Event,
+              idle_s: float = POLL_IDLE_S) -> None:
+    """Hand every sample of a FifoChannel subscriber to `handle` until `stop` is set.
+
+    Polls `try_recv` rather than blocking in `recv`: a thread blocked in `recv` cannot be
+    interrupted, and zenoh aborts the process if its session closes under it."""
+    while not stop.is_set():
+        sample = sub.try_recv()
+        if sample is None:
+            time.sleep(idle_s)
+            continue
+        handle(sample)

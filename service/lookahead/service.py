@@ -27,7 +27,7 @@ from typing import Any
 
 import msgpack
 
-from lookahead.bus import open_session
+from lookahead.bus import open_session, poll_fifo
 from lookahead.config import Config
 from lookahead.planning.base import Planner
 from lookahead.protocol import (
@@ -50,8 +50,6 @@ log = logging.getLogger("lookahead.service")
 
 #: segments buffered by zenoh before the drain thread takes them
 FIFO_CAPACITY = 4096
-#: the drain thread's sleep when the channel is empty (s)
-DRAIN_IDLE_S = 0.002
 #: longest sleep of the main loop (s)
 MAX_SLEEP_S = 0.01
 #: fast mode: batches published between two looks at commands and status
@@ -162,13 +160,9 @@ class PlannerService:
         self._session = None
 
     def _drain(self) -> None:
-        """FifoChannel -> queue (polling: a blocking recv cannot be interrupted cleanly)."""
-        while not self._drain_stop.is_set():
-            sample = self._sub.try_recv()
-            if sample is None:
-                time.sleep(DRAIN_IDLE_S)
-                continue
-            self._incoming.put(sample.payload.to_bytes())
+        """FifoChannel -> queue of payloads, until close()."""
+        poll_fifo(self._sub, lambda sample: self._incoming.put(sample.payload.to_bytes()),
+                  self._drain_stop)
 
     def _on_status(self, query: Any) -> None:
         query.reply(query.key_expr, self._status_payload)
