@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from lookahead.checker import LimitChecker, check_positions
-from lookahead.limits import AxisLimits
+from lookahead.config import default_config
 
-DT = 0.001
-LIMITS = AxisLimits(np.array([500.0, 720.0]), np.array([2000.0, 3000.0]),
-                    np.array([20000.0, 30000.0]))
+MACHINE = default_config().machine
+DT = MACHINE.dt
+LIMITS = MACHINE.limits  # the winder's defaults
 
 
 def smooth_motion(n: int = 400) -> np.ndarray:

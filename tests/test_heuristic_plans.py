@@ -9,6 +9,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from lookahead.checker import check_positions
+from lookahead.config import default_config
 from lookahead.geometry.spline_path import fit_points
 from lookahead.limits import AxisLimits
 from lookahead.planning.base import PathState, PlanningError, PlanRequest
@@ -16,10 +17,10 @@ from lookahead.planning.heuristic import HeuristicPlanner
 from lookahead.planning.scurve import reachable_feed, transition_distance
 from lookahead.sampling import sample_plan
 
-DT = 0.001
-SCALE = np.array([1.0, np.pi / 180.0 * 100.0])
-LIMITS = AxisLimits(np.array([500.0, 720.0]), np.array([2000.0, 3000.0]),
-                    np.array([20000.0, 30000.0]))
+MACHINE = default_config().machine
+DT = MACHINE.dt
+SCALE = np.asarray(MACHINE.path_scale)
+LIMITS = MACHINE.limits  # the winder's defaults
 
 
 def winding_points(strokes: int = 2, stroke_mm: float = 200.0, dwell_deg: float = 90.0,

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from lookahead.checker import check_positions
+from lookahead.config import default_config
 from lookahead.geometry.spline_path import fit_points
-from lookahead.limits import AxisLimits
 from lookahead.planning.base import PathState, PlanRequest
 from lookahead.planning.grid_profile import consistent_durations, grid_time
 from lookahead.planning.lp import LPPlanner, Tightening
@@ -26,10 +26,10 @@ from lookahead.planning.profile_ops import concatenate, slice_profile
 from lookahead.planning.window import WindowedLP
 from lookahead.sampling import sample_plan
 
-LIMITS = AxisLimits(np.array([500.0, 720.0]), np.array([2000.0, 3000.0]),
-                    np.array([20000.0, 30000.0]))
-SCALE = np.array([1.0, np.pi / 180 * 100])
-DT = 0.001
+MACHINE = default_config().machine
+LIMITS = MACHINE.limits  # the winder's defaults
+SCALE = np.asarray(MACHINE.path_scale)
+DT = MACHINE.dt
 
 
 @pytest.fixture(scope="module")
