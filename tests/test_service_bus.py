@@ -114,6 +114,12 @@ def test_publisher_stops_half_way_then_finishes(harness_factory):
     for seg in segs[:half]:
         h.send(seg)
     starved = h.wait_event("starved", "job-s", timeout=30)[0]
+
+    def through_starved() -> bool:  # events and setpoints are separate topics: no order
+        # (called under h.lock, so h.batches directly)
+        return any(b.job == "job-s" and b.k0 + b.n - 1 >= starved.k for b in h.batches)
+
+    h.wait_for(through_starved, what="the setpoints up to the starved event")
     batches = h.job_batches("job-s")
     sent_end = segs[half - 1].points[-1]
     np.testing.assert_allclose(batches[-1].pos[-1], sent_end, atol=1e-6)

@@ -7,7 +7,9 @@ started. Record types (key `type`):
 - `header` (first, once): `format` = "lookahead-recording", `version` = 1, `ns` (key
   namespace), `started_unix` (wall clock, s), `config_toml` (the recorder's machine
   configuration, `lookahead.config.config_to_toml`: replay plans with it; record with the
-  same configuration as the service).
+  same configuration as the service), `software` (the versions of Python and of the
+  packages that decide the setpoints' last bits, `software_versions`; replay compares
+  exactly only under the same ones).
 - `sample`: one message received under `NS/**`: `t`, `key`, `kind` ("put" or "delete"),
   `payload` (bin, the message bytes as received).
 - `liveliness`: a token under `NS/alive/**` appeared or went: `t`, `key`, `alive` (bool).
@@ -21,14 +23,29 @@ Readers ignore record types and fields they do not know.
 
 from __future__ import annotations
 
+import platform
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from importlib import metadata
 from typing import BinaryIO
 
 import msgpack
 
 FORMAT = "lookahead-recording"
 VERSION = 1
+#: the distributions whose versions a recording notes (their arithmetic shapes the setpoints)
+SOFTWARE = ("lookahead", "numpy", "scipy", "ruckig", "osqp")
+
+
+def software_versions() -> dict[str, str]:
+    """Python's version and those of `SOFTWARE` in this environment ("?" if not installed)."""
+    out = {"python": platform.python_version()}
+    for dist in SOFTWARE:
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[dist] = "?"
+    return out
 
 
 class RecordingError(ValueError):
@@ -42,7 +59,8 @@ class RecordingWriter:
         self._fh = fh
         self.count = 0
         self._write({"type": "header", "format": FORMAT, "version": VERSION, "ns": ns,
-                     "started_unix": started_unix, "config_toml": config_toml})
+                     "started_unix": started_unix, "config_toml": config_toml,
+                     "software": software_versions()})
 
     def _write(self, record: dict) -> None:
         self._fh.write(msgpack.packb(record, use_bin_type=True))

@@ -7,7 +7,11 @@ For each recorded setpoint batch, in order: submit the segments its `applied` li
 compare job, seq, k0, n, final and the pos/vel/acc arrays. A recording of a `--fast`
 service replays bit-identically (exit 0); `--realtime` replays a real-time service's
 recording. Commands (hold, override, ...) are queries, not recorded: a recording that used
-them does not replay. Exit 0 if every batch matches (within `--tolerance`, default exact).
+them does not replay. Exit 0 if every batch matches (within `--tolerance`).
+
+Bit-identical is the default only under the software the recording was made with (its
+header's `software`): another numpy, scipy or ruckig rounds differently in the last bits,
+so a recording from elsewhere is compared within `FOREIGN_TOLERANCE`, and replay says so.
 """
 
 from __future__ import annotations
@@ -18,6 +22,9 @@ from dataclasses import dataclass, field
 
 #: engine calls without a batch before a recorded batch counts as missing
 MAX_IDLE_CALLS = 100_000
+#: default tolerance (mm, deg and their per-second derivatives) for a recording made under
+#: other software versions; measured between numpy/scipy releases: 3e-8 (acc, mm/s^2)
+FOREIGN_TOLERANCE = 1e-6
 
 
 def add_parser(sub: argparse._SubParsersAction, name: str, help_text: str
@@ -28,8 +35,10 @@ def add_parser(sub: argparse._SubParsersAction, name: str, help_text: str
     p.add_argument("--config", help="plan with this configuration instead of the recorded one")
     p.add_argument("--realtime", action="store_true",
                    help="the recorded service ran in real time (default: --fast)")
-    p.add_argument("--tolerance", type=float, default=0.0,
-                   help="largest accepted |difference| of pos/vel/acc (default 0: bit-identical)")
+    p.add_argument("--tolerance", type=float, default=None,
+                   help="largest accepted |difference| of pos/vel/acc (default: 0, i.e. "
+                        "bit-identical, under the recording's software versions, else "
+                        f"{FOREIGN_TOLERANCE:g})")
     return p
 
 
@@ -64,12 +73,33 @@ def run(args: argparse.Namespace) -> int:
         import tomllib
 
         cfg = build_config(tomllib.loads(rec.header["config_toml"]), f"{args.file} (header)")
-    res = replay(rec, cfg, realtime=args.realtime, tolerance=args.tolerance)
+    tolerance = args.tolerance
+    if tolerance is None:
+        tolerance = default_tolerance(rec.header.get("software"))
+    res = replay(rec, cfg, realtime=args.realtime, tolerance=tolerance)
     print(f"replay: {res.batches} batches of {len(res.jobs)} job(s) ({res.segments} segments): "
           f"{res.matched} matched, max |difference| {res.max_diff:.3g}")
     if res.first_mismatch:
         print(f"replay: first mismatch: {res.first_mismatch}")
     return 0 if res.identical else 1
+
+
+def default_tolerance(recorded: dict | None) -> float:
+    """0 (bit-identical) if `recorded` (a header's `software`) is this environment's, else
+    `FOREIGN_TOLERANCE`, with a note on stdout naming what differs."""
+    from lookahead_clients.recording import software_versions
+
+    here = software_versions()
+    if recorded == here:
+        return 0.0
+    if not isinstance(recorded, dict):
+        what = "no software versions (an older recording)"
+    else:
+        what = ", ".join(f"{k} {recorded.get(k, '?')} (here {v})" for k, v in here.items()
+                         if recorded.get(k) != v)
+    print(f"replay: the recording names {what}: comparing within {FOREIGN_TOLERANCE:g} "
+          "(--tolerance 0 for bit-identical)")
+    return FOREIGN_TOLERANCE
 
 
 def _max_diff(a, b) -> float:

@@ -127,7 +127,7 @@ class StreamingFit:
         """Kept rows of `arr` and their metric steps from the previous kept point."""
         prev = self._pts.view()[-1] if self._pts.size else None
         chain = arr if prev is None else np.vstack([prev, arr])
-        steps = np.sqrt(np.sum((np.diff(chain, axis=0) * self.path_scale) ** 2, axis=1))
+        steps = self._metric_steps(np.diff(chain, axis=0))
         if prev is None:
             steps = np.concatenate([[np.inf], steps])
         if np.all(steps > self.min_step):
@@ -137,7 +137,7 @@ class StreamingFit:
         keep_rows, keep_steps = [], []
         last = prev
         for row in arr:
-            step = np.inf if last is None else float(np.linalg.norm((row - last) * self.path_scale))
+            step = np.inf if last is None else float(self._metric_steps(row - last))
             if step <= self.min_step:
                 self.skipped += 1
                 continue
@@ -147,6 +147,12 @@ class StreamingFit:
         if not keep_rows:
             return np.empty((0, self.naxes)), np.empty(0)
         return np.array(keep_rows), np.array(keep_steps)
+
+    def _metric_steps(self, deltas: np.ndarray) -> np.ndarray:
+        """Metric lengths of point differences (last axis: the axes). One formula for both
+        passes of `_drop_repeats`: np.linalg.norm rounds differently, and a skipped repeat
+        must leave the same u as a stream without it."""
+        return np.sqrt(np.sum((deltas * self.path_scale) ** 2, axis=-1))
 
     # --- finalization -----------------------------------------------------------------
     def _knots(self, lo: int, hi: int) -> np.ndarray:
