@@ -11,7 +11,7 @@ import pytest
 from lookahead.checker import check_positions
 from lookahead.config import default_config
 from lookahead.geometry.spline_path import fit_points
-from lookahead.planning.base import PathState, PlanRequest
+from lookahead.planning.base import PathState, PlanningError, PlanRequest
 from lookahead.planning.grid_profile import consistent_durations, grid_time
 from lookahead.planning.lp import LPPlanner, Tightening
 from lookahead.planning.lp_envelope import reachable_q
@@ -145,6 +145,27 @@ def test_windows_from_random_start_states_are_continuous(whole, path):
         stitched = concatenate([slice_profile(res.profile, 0.0, t_c), new.profile])
         rep = checker_ok(path, stitched)
         assert rep.violations == 0, rep.first
+
+
+def test_cold_plans_from_moving_states_mostly_succeed(whole, path):
+    """From any state of a plan that met the limits, a fresh planner (no seam) continues
+    within the limits. Measured on these 60 states: 58 planned with the start relief (2
+    nodes), 52 with none or 3 nodes; a few failures are tolerated (the service falls back
+    to the heuristic, the windowed LP to the last plan's stopping tail)."""
+    req, res = whole
+    rng = np.random.default_rng(12)
+    planned = 0
+    for t_c in rng.uniform(0.05, 0.9, size=60) * res.profile.duration:
+        start = res.profile.state_at(float(t_c))
+        window = replace(req, start=start, s_end=min(start.s + 600.0, path.length))
+        try:
+            new = LPPlanner().plan(window)
+        except PlanningError:
+            continue
+        planned += 1
+        stitched = concatenate([slice_profile(res.profile, 0.0, float(t_c)), new.profile])
+        assert checker_ok(path, stitched).violations == 0
+    assert planned >= 56
 
 
 def test_windowed_lp_close_to_whole_and_within_limits(whole, path):

@@ -132,7 +132,7 @@ class LPPlanner:
         max_repairs: int = 8,
         margins: tuple[float, float, float] = (0.995, 0.98, 0.85),
         verify: bool = True,
-        jerk_step: float = 0.3,
+        jerk_step: float = 0.15,
         check_step: float = 0.5,
         envelope_jerk: float = 0.7,
         envelope_margin: float = 0.85,
@@ -142,7 +142,9 @@ class LPPlanner:
         seam_va_pass: bool = False,
         seam_jerk_change: bool = True,
         stall_floor: float = 0.1,
+        start_relief: int = 2,
     ) -> None:
+        self.start_relief = start_relief
         self.stall_floor = stall_floor
         self.reuse = reuse
         self.seam_va_pass = seam_va_pass
@@ -256,6 +258,7 @@ class LPPlanner:
             geo = self.geometry(request.path, s)
             tight = Tightening.uniform(s.size, *self.margins)
             self._pretighten(request, geo, tight, stop_idx)
+            self._relieve_start(request, tight)
             head, q_star_head, a_start, t_cut = fixed_head, None, request.start.a, 0.0
         else:
             geo, stop_idx, tight = self._seam_grid(request, seam)
@@ -541,6 +544,17 @@ class LPPlanner:
             grown[:-off] |= zone[off:]
         grown[:first_free] = False  # reused nodes keep the factors they were solved with
         tight.jerk[grown] *= self.envelope_margin
+
+    def _relieve_start(self, request: PlanRequest, tight: Tightening) -> None:
+        """After a moving start, the first `start_relief` nodes get the limits themselves
+        (factors 1) for acceleration and jerk: the start state comes from a plan that met
+        the limits, not the margins, and may need all of them to continue (a state braking
+        at 0.99 amax cannot be followed under a 0.98 row)."""
+        if request.start.v <= REST or self.start_relief <= 0:
+            return
+        k = self.start_relief
+        tight.acc[:k] = 1.0
+        tight.jerk[:k] = 1.0
 
     def _profile(self, request: PlanRequest, plan: GridPlan, a_start: float) -> FeedProfile:
         a_end = 0.0 if request.v_end <= REST else None
