@@ -69,7 +69,7 @@ class MachineSection:
 class PlannerSection:
     """Planning: method, look-ahead window, fit of point streams, safety margin on limits."""
 
-    method: str = "heuristic"
+    method: str = "lp"
     #: look-ahead window length in seconds of motion at full feed (>= 3 braking distances)
     horizon_s: float = 2.0
     #: fraction of each limit the planner plans to (the checker judges against 1.0)
