@@ -1,5 +1,6 @@
-"""The paper's comparison (its Figs. 7-11): heuristic, LP (whole job), LP (windowed) and
-NLP on the winding presets, beside the TOPPRA velocity+acceleration bound.
+"""The paper's comparison (its Figs. 7-11): heuristic, LP (whole job), LP (windowed; HiGHS,
+and OSQP beside it) and NLP on the winding presets, beside the TOPPRA
+velocity+acceleration bound.
 
 For each preset (`tube-1450`, `tube-9570`: one circuit, fitted with a C2 cubic, machine
 limits of `default_config()`): winding time (s), computation time (median of several runs;
@@ -34,7 +35,9 @@ from lookahead.planning.window import WindowedLP
 from lookahead.sampling import sample_plan
 
 RESULTS = FsPath(__file__).resolve().parent / "results"
-METHODS = ("heuristic", "lp", "lp-windowed", "nlp")
+METHODS = ("heuristic", "lp", "lp-windowed", "lp-windowed-osqp", "nlp")
+#: methods left out of the feed plot (on top of another line there)
+NOT_PLOTTED = ("lp-windowed-osqp",)
 
 
 def log(msg: str) -> None:
@@ -42,6 +45,8 @@ def log(msg: str) -> None:
 
 
 def make_planner(method: str):
+    if method == "lp-windowed-osqp":
+        return WindowedLP(planner=LPPlanner(solver="osqp"))
     return {"heuristic": HeuristicPlanner, "lp": LPPlanner, "lp-windowed": WindowedLP,
             "nlp": NLPPlanner}[method]()
 
@@ -120,6 +125,8 @@ def figure(results: list[dict], out_png: FsPath) -> None:
     ax = fig.add_subplot(grid[0, :])
     first = results[0]
     for m, prof in first["profiles"].items():
+        if m in NOT_PLOTTED:
+            continue
         ax.plot(prof["s"], prof["v"], label=m, lw=1)
     ax.set_xlabel("s (mm)")
     ax.set_ylabel("feed (mm/s)")
@@ -135,7 +142,7 @@ def figure(results: list[dict], out_png: FsPath) -> None:
             axb.bar(x + i * width, vals, width, label=r["preset"])
             if key == "winding_time_s":
                 axb.axhline(r["toppra_bound_s"], ls=":", color=f"C{i}", lw=1)
-        axb.set_xticks(x + 0.4 - width / 2, METHODS)
+        axb.set_xticks(x + 0.4 - width / 2, METHODS, rotation=15)
         axb.set_ylabel(label)
         if key == "compute_s_median":
             axb.set_yscale("log")
@@ -154,7 +161,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         repeats = dict.fromkeys(METHODS, 1)
     else:
-        repeats = {"heuristic": 5, "lp": 5, "lp-windowed": 5, "nlp": 2}
+        repeats = {"heuristic": 5, "lp": 5, "lp-windowed": 5, "lp-windowed-osqp": 3, "nlp": 2}
     out_dir = FsPath(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
     results = [measure(p, repeats) for p in args.presets]
