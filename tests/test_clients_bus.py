@@ -138,7 +138,7 @@ def test_record_then_replay_is_bit_identical(tmp_path):
                               "--tolerance", "1e-9"], capture_output=True, text=True,
                              timeout=120)
     assert out.returncode == 0, out.stdout + out.stderr
-    assert "batches of 1 job(s) (6 segments)" in out.stdout
+    assert "batches of 1 job(s) (6 segments, 0 commands)" in out.stdout
 
 
 def test_golden_recording_replays_bit_identically():
@@ -200,3 +200,43 @@ def test_killed_planner_is_reported(tmp_path):
     assert report["job"] == "doomed" and not report["clean"]
     assert "planner" in report["fault"]
     assert report["samples"] > 500 and report["violations"] == 0
+
+
+def cmd(env, *argv) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "lookahead", "cmd", *argv], env=env,
+                          capture_output=True, text=True, timeout=60)
+
+
+def test_commands_from_the_cli_are_recorded_and_replay_exactly(tmp_path):
+    """`lookahead cmd` overrides, holds and resumes a real-time job; the recording lists
+    the commands in the setpoint batches and replays bit-identically."""
+    env = bus_env("lp")
+    rec_path = tmp_path / "commands.rec"
+    assert cmd(env, "hold", "--timeout", "1").returncode == 4  # no service yet
+    service = lookahead(env, "serve", "--log-level", "WARNING")
+    recorder = lookahead(env, "record", str(rec_path), "--jobs", "1")
+    try:
+        wait_alive(env, "planner")
+        time.sleep(0.5)  # the recorder's subscription settles
+        pub = lookahead(env, "publish", "tube-1450", "--job", "cmds", "--quiet",
+                        "--timeout", "60")
+        time.sleep(2.0)
+        assert cmd(env, "override", "0.5").returncode == 0
+        assert cmd(env, "override").returncode == 2  # no value
+        assert cmd(env, "override", "2").returncode == 2  # out of range, not sent
+        time.sleep(1.0)
+        assert cmd(env, "hold").returncode == 0
+        time.sleep(1.0)
+        assert cmd(env, "resume").returncode == 0
+        refused = cmd(env, "resume")
+        assert refused.returncode == 1 and "not holding" in refused.stderr
+        assert cmd(env, "override", "1").returncode == 0
+        pub.wait(timeout=60)
+        assert pub.returncode == 0
+        recorder.wait(timeout=30)
+    finally:
+        stop(service, recorder)
+    out = subprocess.run([sys.executable, "-m", "lookahead", "replay", str(rec_path),
+                          "--realtime"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert " 5 commands)" in out.stdout  # the refused resume is replayed too

@@ -161,12 +161,14 @@ def test_setpoint_batch_round_trip_is_bit_exact() -> None:
     rng = np.random.default_rng(1)
     pos, vel, acc = (rng.normal(size=(10, 2)) for _ in range(3))
     batch = SetpointBatch("job1", 4, 40, 0.001, AXES, pos, vel, acc, final=True,
-                          applied=(("job1", 3), ("job2", 0)))
+                          applied=(("job1", 3), ("job2", 0)),
+                          commands=(("hold", None, 0), ("override", 0.5, 2)))
     raw = batch.encode()
     assert isinstance(msgpack.unpackb(raw)["pos"], bytes)  # bin, not an array
     again = SetpointBatch.decode(raw)
     assert again.n == 10 and again.k0 == 40 and again.final and again.axes == AXES
     assert again.applied == (("job1", 3), ("job2", 0))
+    assert again.commands == (("hold", None, 0), ("override", 0.5, 2))
     for a, b in ((again.pos, pos), (again.vel, vel), (again.acc, acc)):
         assert a.tobytes() == b.tobytes()
 
@@ -177,6 +179,22 @@ def test_setpoint_batch_checks_blob_sizes() -> None:
     raw["n"] = 3
     with pytest.raises(ProtocolError, match="pos: expected 48 bytes"):
         SetpointBatch.decode(msgpack.packb(raw, use_bin_type=True))
+
+
+@pytest.mark.parametrize(("commands", "field"), [
+    ([["jump", None, 0]], "commands[0][0]"),  # not a verb
+    ([["override", "fast", 0]], "commands[0][1]"),
+    ([["hold", None, 1]], "commands[0][2]"),  # after more segments than the batch applied
+    ([["hold", None]], "commands[0]"),
+    ({"hold": 1}, "commands"),
+])
+def test_setpoint_batch_rejects_bad_commands(commands, field) -> None:
+    z = np.zeros((1, 2))
+    raw = msgpack.unpackb(SetpointBatch("j", 0, 0, 0.001, AXES, z, z, z, False).encode())
+    raw["commands"] = commands
+    with pytest.raises(ProtocolError) as info:
+        SetpointBatch.decode(msgpack.packb(raw, use_bin_type=True))
+    assert info.value.field == field
 
 
 def test_status_event_reply_command_round_trip() -> None:

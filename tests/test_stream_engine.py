@@ -7,7 +7,7 @@ import pytest
 
 from lookahead.checker import check_positions
 from lookahead.config import default_config
-from lookahead.protocol import Command, Segment
+from lookahead.protocol import Command, Segment, SetpointBatch
 from lookahead.stream.engine import Engine
 from lookahead.stream.planners import make_planner
 
@@ -61,6 +61,50 @@ def test_replay_from_applied_lists_is_bit_identical():
         assert np.array_equal(a.pos, b.pos) and np.array_equal(a.acc, b.acc)
     assert check_positions(np.vstack([b.pos for b in first]), cfg.machine.limits,
                            cfg.machine.dt).ok
+
+
+def test_replay_with_commands_is_bit_identical():
+    """Hold, resume and overrides, taken in between segments, are listed in the batches'
+    `commands` (with their place among the `applied` segments) and replay exactly."""
+    cfg = default_config()
+    segs = _segments("c", _points(), 37)
+    live = Engine(cfg, make_planner("lp"))
+    script = {30: [Command("override", 0.6)], 60: [Command("hold")],
+              90: [Command("resume"), Command("override", 1.2)], 120: [Command("reset")]}
+    feed = {0: segs[:3], 60: segs[3:6], 120: segs[6:]}
+    first = []
+    for i in range(100000):
+        for seg in feed.get(i, [])[:1]:
+            live.submit(seg)
+        for cmd in script.get(i, []):
+            live.command(cmd)
+        for seg in feed.get(i, [])[1:]:
+            live.submit(seg)
+        batch = live.next_batch()
+        if batch is not None:
+            first.append(SetpointBatch.decode(batch.encode()))  # through the wire format
+            if batch.final:
+                break
+    listed = [c for b in first for c in b.commands]
+    assert [(v, x) for v, x, _ in listed] == [(c.verb, c.value) for i in sorted(script)
+                                              for c in script[i]]
+    # some command sits between two segments of its batch: the interleaving is exercised
+    assert any(0 < c[2] < len(b.applied) for b in first for c in b.commands)
+    by_id = {(s.job, s.seq): s for s in segs}
+    replay_engine = Engine(cfg, make_planner("lp"))
+    for rec in first:
+        for i in range(len(rec.applied) + 1):
+            for verb, value, _ in (c for c in rec.commands if c[2] == i):
+                replay_engine.command(Command(verb, value))
+            if i < len(rec.applied):
+                replay_engine.submit(by_id[rec.applied[i]])
+        batch = None
+        while batch is None:
+            batch = replay_engine.next_batch()
+        assert (batch.k0, batch.n, batch.final) == (rec.k0, rec.n, rec.final)
+        assert np.array_equal(batch.pos, rec.pos) and np.array_equal(batch.acc, rec.acc)
+    pos = np.vstack([b.pos for b in first])
+    assert check_positions(pos, cfg.machine.limits, cfg.machine.dt).ok
 
 
 def test_duplicates_wrong_axes_and_late_segments_are_rejected():

@@ -3,11 +3,11 @@ sample indices where the service took them in, and compare the setpoints it prod
 the recorded ones, batch by batch.
 
 For each recorded setpoint batch, in order: submit the segments its `applied` list names
-(their recorded payloads), then ask the engine for batches until it returns one, and
-compare job, seq, k0, n, final and the pos/vel/acc arrays. A recording of a `--fast`
-service replays bit-identically (exit 0); `--realtime` replays a real-time service's
-recording. Commands (hold, override, ...) are queries, not recorded: a recording that used
-them does not replay. Exit 0 if every batch matches (within `--tolerance`).
+(their recorded payloads) and apply the commands (hold, override, ...) its `commands` list
+names, in the order the service took them in, then ask the engine for batches until it
+returns one, and compare job, seq, k0, n, final and the pos/vel/acc arrays. A recording of
+a `--fast` service replays bit-identically (exit 0); `--realtime` replays a real-time
+service's recording. Exit 0 if every batch matches (within `--tolerance`).
 
 Bit-identical is the default only under the software the recording was made with (its
 header's `software`): another numpy, scipy or ruckig rounds differently in the last bits,
@@ -49,6 +49,7 @@ class ReplayResult:
     batches: int = 0
     matched: int = 0
     segments: int = 0
+    commands: int = 0
     max_diff: float = 0.0
     first_mismatch: str | None = None
     jobs: list[str] = field(default_factory=list)
@@ -77,7 +78,8 @@ def run(args: argparse.Namespace) -> int:
     if tolerance is None:
         tolerance = default_tolerance(rec.header.get("software"))
     res = replay(rec, cfg, realtime=args.realtime, tolerance=tolerance)
-    print(f"replay: {res.batches} batches of {len(res.jobs)} job(s) ({res.segments} segments): "
+    print(f"replay: {res.batches} batches of {len(res.jobs)} job(s) ({res.segments} segments, "
+          f"{res.commands} commands): "
           f"{res.matched} matched, max |difference| {res.max_diff:.3g}")
     if res.first_mismatch:
         print(f"replay: first mismatch: {res.first_mismatch}")
@@ -114,7 +116,7 @@ def _max_diff(a, b) -> float:
 
 def replay(rec, cfg, realtime: bool = False, tolerance: float = 0.0) -> ReplayResult:
     """Replay `rec` (a `Recording`) into a fresh Engine planning with `cfg`."""
-    from lookahead.protocol import ProtocolError, Segment, SetpointBatch
+    from lookahead.protocol import Command, ProtocolError, Segment, SetpointBatch
     from lookahead.stream.engine import Engine
     from lookahead.stream.planners import make_planner
 
@@ -132,7 +134,14 @@ def replay(rec, cfg, realtime: bool = False, tolerance: float = 0.0) -> ReplayRe
         res.batches += 1
         if want.job not in res.jobs:
             res.jobs.append(want.job)
-        for job, seq in want.applied:
+        for i in range(len(want.applied) + 1):
+            # the commands applied after the first i segments, then segment i
+            for verb, value, _ in (c for c in want.commands if c[2] == i):
+                engine.command(Command(verb, value))
+                res.commands += 1
+            if i == len(want.applied):
+                break
+            job, seq = want.applied[i]
             payload = segments.get((job, seq))
             if payload is None:
                 res.first_mismatch = res.first_mismatch or \

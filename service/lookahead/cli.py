@@ -26,6 +26,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "replay": ("lookahead_clients.replay", "replay a recording into a fresh service"),
     "demo": ("lookahead_clients.demo", "service + winder + publisher together (tube-1450)"),
     "status": ("lookahead_clients.status", "ask the service for its status (healthcheck)"),
+    "cmd": ("lookahead_clients.command", "hold, resume, override, abort or reset the service"),
 }
 
 EXIT_NOT_BUILT = 3

@@ -299,6 +299,9 @@ class SetpointBatch:
     applied: our extension: (job, seq) of the segments the service took in just before it
     produced this batch (so a recorder knows the sample index k0 at which each segment was
     received, and a replay can feed them at the same indices).
+    commands: our extension: (verb, value, after) of the commands the service applied just
+    before it produced this batch, in order; `after` = how many of `applied` it had taken
+    in before the command (a replay interleaves them exactly).
     """
 
     job: str
@@ -311,6 +314,7 @@ class SetpointBatch:
     acc: np.ndarray
     final: bool
     applied: tuple[tuple[str, int], ...] = ()
+    commands: tuple[tuple[str, float | None, int], ...] = ()
 
     @property
     def n(self) -> int:
@@ -324,7 +328,8 @@ class SetpointBatch:
                       "dt": self.dt, "axes": list(self.axes), "n": self.n,
                       "pos": blob(self.pos), "vel": blob(self.vel), "acc": blob(self.acc),
                       "final": self.final,
-                      "applied": [[job, seq] for job, seq in self.applied]})
+                      "applied": [[job, seq] for job, seq in self.applied],
+                      "commands": [[verb, value, after] for verb, value, after in self.commands]})
 
     @staticmethod
     def decode(payload: bytes) -> SetpointBatch:
@@ -347,7 +352,9 @@ class SetpointBatch:
                                     f"(n={n} x {len(axes)} axes x 8), got {len(raw)}")
             arrays.append(np.frombuffer(raw, dtype="<f8").reshape(n, len(axes)))
         applied = _applied(msg.get("applied", []))
-        return SetpointBatch(job, seq, k0, dt, axes, *arrays, final=final, applied=applied)
+        commands = _commands(msg.get("commands", []), len(applied))
+        return SetpointBatch(job, seq, k0, dt, axes, *arrays, final=final, applied=applied,
+                             commands=commands)
 
 
 def _applied(value: Any) -> tuple[tuple[str, int], ...]:
@@ -358,6 +365,23 @@ def _applied(value: Any) -> tuple[tuple[str, int], ...]:
         if not isinstance(item, list | tuple) or len(item) != 2:
             raise ProtocolError(f"applied[{i}]", "expected a [job, seq] pair")
         out.append((_job(item[0], f"applied[{i}][0]"), _int(item[1], f"applied[{i}][1]", lo=0)))
+    return tuple(out)
+
+
+def _commands(value: Any, n_applied: int) -> tuple[tuple[str, float | None, int], ...]:
+    if not isinstance(value, list | tuple):
+        raise ProtocolError("commands", "expected an array of [verb, value, after] triples")
+    out = []
+    for i, item in enumerate(value):
+        where = f"commands[{i}]"
+        if not isinstance(item, list | tuple) or len(item) != 3:
+            raise ProtocolError(where, "expected a [verb, value, after] triple")
+        verb = _str(item[0], f"{where}[0]")
+        if verb not in COMMANDS:
+            raise ProtocolError(f"{where}[0]", f"must be one of {', '.join(COMMANDS)}, "
+                                f"got {verb!r}")
+        val = None if item[1] is None else _float(item[1], f"{where}[1]")
+        out.append((verb, val, _int(item[2], f"{where}[2]", lo=0, hi=n_applied)))
     return tuple(out)
 
 

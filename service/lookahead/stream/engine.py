@@ -19,11 +19,13 @@ API (stable; the replay client depends on it):
   while a job waits for enough geometry to start (each such call counts as one batch of
   waiting, bounded by START_WAIT_S), and in fast mode (realtime=False) while starved or
   holding at rest. Real-time mode keeps emitting rest samples then.
-- `command(Command) -> CommandReply`, `status() -> Status`.
+- `command(Command) -> CommandReply` (listed in the next batch's `commands` field),
+  `status() -> Status`.
 - `drain_events() -> list[Event]`: every event since the last call (including those that
   `submit`/`expire_gaps`/`reject` returned): publish events from here only.
 
-Replay: for each recorded batch, submit the segments named in its `applied` list, then call
+Replay: for each recorded batch, submit the segments named in its `applied` list and apply
+the commands of its `commands` list, interleaved as their `after` counts say, then call
 `next_batch()` until it returns a batch; the batches are bit-identical to the recording.
 
 Planning (DESIGN.md "Look-ahead window"): every plan starts in the state of the last
@@ -153,6 +155,7 @@ class Engine:
         self._active: _Job | None = None
         self._events: list[Event] = []
         self._applied: list[tuple[str, int]] = []
+        self._commands: list[tuple[str, float | None, int]] = []
         self.override = 1.0
         self.fault: str | None = None
         self.plan_ms = 0.0
@@ -269,7 +272,7 @@ class Engine:
             len(self.axes))
         zeros = np.zeros((1, len(self.axes)))
         batch = SetpointBatch(job.id, 0, 0, self.dt, self.axes, point.reshape(1, -1), zeros,
-                              zeros.copy(), True, applied=self._take_applied())
+                              zeros.copy(), True, *self._take_inputs())
         self._position = point.copy()
         self._last_k, self._last_job, self._job_error = 0, job.id, None
         self._emit("job_started", job.id, 0)
@@ -291,7 +294,7 @@ class Engine:
                 return None
         smp = plan.samples(k0, n, self.dt)
         batch = SetpointBatch(job.id, job.batch_seq, k0, self.dt, self.axes, smp.pos, smp.vel,
-                              smp.acc, final, applied=self._take_applied())
+                              smp.acc, final, *self._take_inputs())
         job.k += n
         job.batch_seq += 1
         job.tail = np.vstack([job.tail, smp.pos])[-3:]
@@ -322,9 +325,13 @@ class Engine:
     def _tol(self, job: _Job) -> float:
         return S_TOL * max(job.geo.sent_length, 1.0)
 
-    def _take_applied(self) -> tuple[tuple[str, int], ...]:
-        out = tuple(self._applied)
+    def _take_inputs(self) -> tuple[tuple[tuple[str, int], ...],
+                                    tuple[tuple[str, float | None, int], ...]]:
+        """The segments and commands taken in since the last batch (its `applied` and
+        `commands` fields)."""
+        out = tuple(self._applied), tuple(self._commands)
         self._applied.clear()
+        self._commands.clear()
         return out
 
     # --- planning ---------------------------------------------------------------------
@@ -468,7 +475,12 @@ class Engine:
 
     # --- commands ---------------------------------------------------------------------
     def command(self, cmd: Command) -> CommandReply:
-        """Apply hold / resume / override / abort / reset (effects at the next batch)."""
+        """Apply hold / resume / override / abort / reset (effects at the next batch). Every
+        command is listed in the next batch's `commands` field, for replay."""
+        self._commands.append((cmd.verb, cmd.value, len(self._applied)))
+        return self._apply_command(cmd)
+
+    def _apply_command(self, cmd: Command) -> CommandReply:
         job = self._active
         if cmd.verb == "override":
             assert cmd.value is not None
