@@ -5,7 +5,10 @@
    chunks);
 3. real-time factor (motion time / wall time) of tube-9570 streamed in 100-point chunks
    through the bus in --fast mode, both methods;
-4. CPU share of a `lookahead serve` process in real-time mode at dt = 1 ms (tube-1450).
+4. CPU share of a `lookahead serve` process in real-time mode at dt = 1 ms (tube-1450);
+5. a whole layer (45 circuits of tube-1450, 117541 points in 500-point segments, all sent
+   at once) through the engine, LP: the wall time per 20 s of motion from start to end (flat
+   = nothing grows with the job) and the cost of one status() (`--quick` skips this).
 
 Run: /tmp/venv/bin/python bench/service_stream.py [--quick]
 """
@@ -146,9 +149,41 @@ def cpu_share(method: str) -> dict:
         os.unlink(f.name)
 
 
+def long_job(method: str = "lp", circuits: int = 45, chunk: int = 500) -> dict:
+    """A layer through the engine; wall time per 20 s of motion and of a status() call."""
+    cfg = default_config()
+    _, pts, _ = preset_points("tube-1450", circuits=circuits)
+    segs = point_segments("layer", pts, [chunk] * (len(pts) // chunk + 1))
+    eng = Engine(cfg, make_planner(method))
+    t0 = time.perf_counter()
+    for seg in segs:
+        eng.submit(seg)
+    status_ms = []
+    per_20s, samples, mark, last = [], 0, 20.0, time.perf_counter()
+    while True:
+        batch = eng.next_batch()
+        if batch is None:
+            continue
+        samples += batch.n
+        if samples * cfg.machine.dt >= mark:
+            t = time.perf_counter()
+            eng.status()
+            status_ms.append(1e3 * (time.perf_counter() - t))
+            per_20s.append(t - last)
+            last, mark = time.perf_counter(), mark + 20.0
+        if batch.final:
+            break
+    wall = time.perf_counter() - t0
+    motion = samples * cfg.machine.dt
+    return {"method": method, "points": len(pts), "segments": len(segs),
+            "motion_s": motion, "wall_s": wall, "realtime_factor": motion / wall,
+            "wall_per_20s_motion": per_20s, "status_ms_median": float(np.median(status_ms))}
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--quick", action="store_true", help="skip the LP on tube-9570")
+    ap.add_argument("--quick", action="store_true",
+                    help="skip the LP on tube-9570 and the layer")
     args = ap.parse_args()
     out: dict = {"machine": {"cpus": os.cpu_count()}}
     out["latency_first_batch_s"] = {"fast": latency(True), "realtime": latency(False)}
@@ -161,6 +196,9 @@ def main() -> int:
     print(out["realtime_factor_tube_9570_fast"], flush=True)
     out["cpu_share_realtime"] = {m: cpu_share(m) for m in ("heuristic", "lp")}
     print(out["cpu_share_realtime"], flush=True)
+    if not args.quick:
+        out["layer_engine"] = long_job()
+        print(out["layer_engine"], flush=True)
     dest = ROOT / "bench" / "results" / "service_stream.json"
     dest.parent.mkdir(parents=True, exist_ok=True)
     dest.write_text(json.dumps(out, indent=2) + "\n")
