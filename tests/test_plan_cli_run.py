@@ -51,3 +51,18 @@ def test_plot_is_written(tmp_path):
     png = tmp_path / "p.png"
     assert plan_cli.run(parse([str(npy), "--method", "heuristic", "--plot", str(png)])) == 0
     assert png.stat().st_size > 10_000
+
+
+def test_a_preset_name_is_an_input_too(tmp_path, capsys, monkeypatch):
+    """`lookahead plan tube-1450` plans the preset, as `lookahead publish tube-1450` sends
+    it; a file of that name in the working directory would win."""
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "preset.npz"
+    assert plan_cli.run(parse(["tube-1450", "--method", "heuristic", "--out", str(out)])) == 0
+    assert "violations    0" in capsys.readouterr().out
+    from lookahead.geometry.winding import preset_points
+
+    _, pts, _ = preset_points("tube-1450")
+    np.testing.assert_allclose(np.load(out)["pos"][-1], pts[-1], atol=1e-6)
+    (tmp_path / "tube-1450").write_text("X,C\n0,0\n")  # one point: not a path
+    assert plan_cli.run(parse(["tube-1450", "--method", "heuristic"])) == 2

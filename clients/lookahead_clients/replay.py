@@ -5,9 +5,9 @@ the recorded ones, batch by batch.
 For each recorded setpoint batch, in order: submit the segments its `applied` list names
 (their recorded payloads) and apply the commands (hold, override, ...) its `commands` list
 names, in the order the service took them in, then ask the engine for batches until it
-returns one, and compare job, seq, k0, n, final and the pos/vel/acc arrays. A recording of
-a `--fast` service replays bit-identically (exit 0); `--realtime` replays a real-time
-service's recording. Exit 0 if every batch matches (within `--tolerance`).
+returns one, and compare job, seq, k0, n, final and the pos/vel/acc arrays. The engine runs
+as the recorded service did, `--fast` or in real time (`--mode`; by default it tries both).
+Exit 0 if every batch matches (within `--tolerance`).
 
 Bit-identical is the default only under the software the recording was made with (its
 header's `software`): another numpy, scipy or ruckig rounds differently in the last bits,
@@ -33,8 +33,10 @@ def add_parser(sub: argparse._SubParsersAction, name: str, help_text: str
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("file", help="recording written by `lookahead record`")
     p.add_argument("--config", help="plan with this configuration instead of the recorded one")
-    p.add_argument("--realtime", action="store_true",
-                   help="the recorded service ran in real time (default: --fast)")
+    p.add_argument("--mode", choices=("auto", "fast", "realtime"), default="auto",
+                   help="how the recorded service ran: `serve --fast` or in real time "
+                        "(default auto: fast, then real time if that does not match)")
+    p.add_argument("--realtime", action="store_true", help="the same as --mode realtime")
     p.add_argument("--tolerance", type=float, default=None,
                    help="largest accepted |difference| of pos/vel/acc (default: 0, i.e. "
                         "bit-identical, under the recording's software versions, else "
@@ -77,7 +79,15 @@ def run(args: argparse.Namespace) -> int:
     tolerance = args.tolerance
     if tolerance is None:
         tolerance = default_tolerance(rec.header.get("software"))
-    res = replay(rec, cfg, realtime=args.realtime, tolerance=tolerance)
+    mode = "realtime" if args.realtime else args.mode
+    # the modes differ only while holding or starved (real time keeps emitting rest
+    # samples), so a recording without either matches both
+    for realtime in {"auto": (False, True), "fast": (False,), "realtime": (True,)}[mode]:
+        res = replay(rec, cfg, realtime=realtime, tolerance=tolerance)
+        if res.identical:
+            break
+    if mode == "auto" and res.identical and realtime:
+        print("replay: matched as a real-time service's recording")
     print(f"replay: {res.batches} batches of {len(res.jobs)} job(s) ({res.segments} segments, "
           f"{res.commands} commands): "
           f"{res.matched} matched, max |difference| {res.max_diff:.3g}")

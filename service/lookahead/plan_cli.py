@@ -1,7 +1,7 @@
 """`lookahead plan`: plan a whole job offline, check it, report, save and plot it.
 
-Input: a preset (`--preset tube-1450`), a points file (CSV with a header of axis names, or
-.npy) or a G-code file (.nc/.gcode/.ngc/.tap). Output: a summary on stdout (duration,
+Input: a preset (`tube-1450` or `--preset tube-1450`), a points file (CSV with a header of
+axis names, or .npy) or a G-code file (.nc/.gcode/.ngc/.tap). Output: a summary on stdout (duration,
 compute time, per-axis peaks as a fraction of the limit from the finite-difference checker,
 violations); `--out FILE.npz` with pos, vel, acc (K x axes), dt, axes; `--plot FILE.png`.
 Exit status 0 when the sampled stream passes the checker, 1 when it does not, 2 on bad input.
@@ -28,7 +28,8 @@ def add_parser(subparsers, name: str = "plan",
                               formatter_class=argparse.RawDescriptionHelpFormatter)
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--preset", help="winding preset, e.g. tube-1450 or tube-9570")
-    src.add_argument("input", nargs="?", help="points file (.csv/.npy) or G-code file")
+    src.add_argument("input", nargs="?",
+                     help="preset name (as --preset), points file (.csv/.npy) or G-code file")
     p.add_argument("--circuits", default=None,
                    help="preset circuits: a number or 'layer' (default: 1 circuit)")
     p.add_argument("--method", choices=METHODS, default=None,
@@ -49,13 +50,16 @@ def load_planner(method: str):
 
 
 def _read_input(args: argparse.Namespace, axes: list[str]) -> tuple[list[str], np.ndarray]:
-    if args.preset:
-        from lookahead.geometry.winding import preset_points
+    from lookahead.geometry.winding import PRESETS, preset_points
 
+    preset = args.preset
+    if preset is None and args.input in PRESETS and not FilePath(args.input).exists():
+        preset = args.input  # `lookahead plan tube-1450`, as `lookahead publish` takes it
+    if preset:
         circuits = args.circuits
         if circuits is not None and circuits != "layer":
             circuits = int(circuits)
-        names, points, _ = preset_points(args.preset, circuits)
+        names, points, _ = preset_points(preset, circuits)
         return names, points
     path = FilePath(args.input)
     if path.suffix.lower() in _GCODE_SUFFIXES:
