@@ -10,6 +10,7 @@ from lookahead.config import default_config
 from lookahead.protocol import Command, Segment, SetpointBatch
 from lookahead.stream.engine import Engine
 from lookahead.stream.planners import make_planner
+from lookahead_clients.replay import batch_inputs
 
 AXES = ("X", "C")
 
@@ -93,11 +94,11 @@ def test_replay_with_commands_is_bit_identical():
     by_id = {(s.job, s.seq): s for s in segs}
     replay_engine = Engine(cfg, make_planner("lp"))
     for rec in first:
-        for i in range(len(rec.applied) + 1):
-            for verb, value, _ in (c for c in rec.commands if c[2] == i):
-                replay_engine.command(Command(verb, value))
-            if i < len(rec.applied):
-                replay_engine.submit(by_id[rec.applied[i]])
+        for item in batch_inputs(rec):
+            if isinstance(item, Command):
+                replay_engine.command(item)
+            else:
+                replay_engine.submit(by_id[item])
         batch = None
         while batch is None:
             batch = replay_engine.next_batch()

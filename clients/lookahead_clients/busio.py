@@ -102,3 +102,14 @@ def wait_for_token(session, key_expr: str, timeout: float) -> bool:
         if time.monotonic() >= deadline:
             return False
         time.sleep(0.1)
+
+
+def query_once(session, key_expr: str, timeout: float, payload: bytes | None = None
+               ) -> bytes | None:
+    """The payload of the first successful reply to one `get` on `key_expr` (with
+    `payload` if given), or None if none came within `timeout` s."""
+    kwargs = {} if payload is None else {"payload": payload}
+    for reply in session.get(key_expr, timeout=timeout, **kwargs):
+        if reply.ok is not None:
+            return reply.ok.payload.to_bytes()
+    return None

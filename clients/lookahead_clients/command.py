@@ -30,6 +30,7 @@ def run(args: argparse.Namespace) -> int:
     from lookahead.bus import open_client_session
     from lookahead.config import load_config_or_exit
     from lookahead.protocol import Command, CommandReply, ProtocolError, key
+    from lookahead_clients.busio import query_once
 
     if (args.verb == "override") != (args.value is not None):
         print("cmd: override takes a value (e.g. `lookahead cmd override 0.5`), the other "
@@ -45,22 +46,20 @@ def run(args: argparse.Namespace) -> int:
     target = key(cfg.ns, "cmd", cmd.verb)
     session = open_client_session(cfg.zenoh)
     try:
-        for reply in session.get(target, payload=payload, timeout=args.timeout):
-            if reply.ok is None:
-                continue
-            try:
-                answer = CommandReply.decode(reply.ok.payload.to_bytes())
-            except ProtocolError as exc:
-                print(f"cmd: malformed reply: {exc}", file=sys.stderr)
-                return 1
-            if answer.ok:
-                print(f"{cfg.ns}: {cmd.verb}{'' if cmd.value is None else f' {cmd.value:g}'}"
-                      " accepted")
-                return 0
-            print(f"cmd: {cmd.verb} refused: {answer.error}", file=sys.stderr)
-            return 1
+        raw = query_once(session, target, args.timeout, payload)
+    finally:
+        session.close()
+    if raw is None:
         print(f"cmd: no planner answered on {target} within {args.timeout} s",
               file=sys.stderr)
         return 4
-    finally:
-        session.close()
+    try:
+        answer = CommandReply.decode(raw)
+    except ProtocolError as exc:
+        print(f"cmd: malformed reply: {exc}", file=sys.stderr)
+        return 1
+    if not answer.ok:
+        print(f"cmd: {cmd.verb} refused: {answer.error}", file=sys.stderr)
+        return 1
+    print(f"{cfg.ns}: {cmd.verb}{'' if cmd.value is None else f' {cmd.value:g}'} accepted")
+    return 0

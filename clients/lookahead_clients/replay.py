@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 #: engine calls without a batch before a recorded batch counts as missing
@@ -114,6 +115,19 @@ def default_tolerance(recorded: dict | None) -> float:
     return FOREIGN_TOLERANCE
 
 
+def batch_inputs(batch) -> Iterator:
+    """What the service took in before producing `batch` (a SetpointBatch), in its order:
+    the (job, seq) of each `applied` segment and a Command for each of its `commands`."""
+    from lookahead.protocol import Command
+
+    for i in range(len(batch.applied) + 1):
+        for verb, value, after in batch.commands:
+            if after == i:
+                yield Command(verb, value)
+        if i < len(batch.applied):
+            yield batch.applied[i]
+
+
 def _max_diff(a, b) -> float:
     import numpy as np
 
@@ -144,18 +158,15 @@ def replay(rec, cfg, realtime: bool = False, tolerance: float = 0.0) -> ReplayRe
         res.batches += 1
         if want.job not in res.jobs:
             res.jobs.append(want.job)
-        for i in range(len(want.applied) + 1):
-            # the commands applied after the first i segments, then segment i
-            for verb, value, _ in (c for c in want.commands if c[2] == i):
-                engine.command(Command(verb, value))
+        for item in batch_inputs(want):
+            if isinstance(item, Command):
+                engine.command(item)
                 res.commands += 1
-            if i == len(want.applied):
-                break
-            job, seq = want.applied[i]
-            payload = segments.get((job, seq))
+                continue
+            payload = segments.get(item)
             if payload is None:
                 res.first_mismatch = res.first_mismatch or \
-                    f"segment {job}/{seq} is listed as applied but was not recorded"
+                    f"segment {item[0]}/{item[1]} is listed as applied but was not recorded"
                 continue
             engine.submit(Segment.decode(payload))
             res.segments += 1

@@ -25,6 +25,7 @@ def run(args: argparse.Namespace) -> int:
     from lookahead.bus import open_client_session
     from lookahead.config import load_config_or_exit
     from lookahead.protocol import ProtocolError, Status, key
+    from lookahead_clients.busio import query_once
 
     cfg = load_config_or_exit(args.config)
     session = open_client_session(cfg.zenoh)
@@ -32,16 +33,15 @@ def run(args: argparse.Namespace) -> int:
         deadline = time.monotonic() + args.timeout
         status = None
         while status is None and time.monotonic() < deadline:
-            for reply in session.get(key(cfg.ns, "status"), timeout=max(0.1, args.timeout)):
-                if reply.ok is None:
-                    continue
-                try:
-                    status = Status.decode(reply.ok.payload.to_bytes())
-                except ProtocolError as exc:
-                    print(f"status: malformed reply: {exc}", file=sys.stderr)
-                    return 1
-            if status is None:
+            raw = query_once(session, key(cfg.ns, "status"), max(0.1, args.timeout))
+            if raw is None:
                 time.sleep(0.2)
+                continue
+            try:
+                status = Status.decode(raw)
+            except ProtocolError as exc:
+                print(f"status: malformed reply: {exc}", file=sys.stderr)
+                return 1
         missing = [who for who in args.expect
                    if not _alive(session, key(cfg.ns, "alive", who), deadline)]
         if status is None:
