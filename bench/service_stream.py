@@ -8,7 +8,11 @@
 4. CPU share of a `lookahead serve` process in real-time mode at dt = 1 ms (tube-1450);
 5. a whole layer (45 circuits of tube-1450, 117541 points in 500-point segments, all sent
    at once) through the engine, LP: the wall time per 20 s of motion from start to end (flat
-   = nothing grows with the job) and the cost of one status() (`--quick` skips this).
+   = nothing grows with the job) and the cost of one status() (`--quick` skips this);
+6. hold latency in real time, both methods (tube-9570): the motion already produced when a
+   `hold` arrives (the batch the engine makes next, the first that can slow down, starts
+   that far after the last sample the client had received; the machine adds the 50 ms
+   lead), over 5 holds per job.
 
 Run: /tmp/venv/bin/python bench/service_stream.py [--quick]
 """
@@ -149,6 +153,37 @@ def cpu_share(method: str) -> dict:
         os.unlink(f.name)
 
 
+def hold_latency(method: str, holds: int = 5) -> dict:
+    """Real time: for each hold, the sample index k0 of the batch listing it (its
+    `commands`) minus the last sample the client had received when it sent it (ms)."""
+    h = Harness(service_config(method), fast=False)
+    try:
+        _, pts, _ = preset_points("tube-9570")
+        for seg in point_segments("hold", pts, [500] * (len(pts) // 500 + 1)):
+            h.send(seg)
+        h.wait_for(lambda: len(h.batches) > 100, 30, "1 s of motion")
+        ahead_ms = []
+        for _ in range(holds):
+            with h.lock:
+                k_recv = max(b.k0 + b.n - 1 for b in h.batches)
+            assert h.command("hold").ok
+            h.wait_for(lambda: any(c[0] == "hold" for b in h.batches[-300:]
+                                   for c in b.commands), 10, "the hold's batch")
+            with h.lock:
+                k_hold = next(b.k0 for b in h.batches if any(c[0] == "hold"
+                                                             for c in b.commands))
+                h.batches[:] = [b for b in h.batches if b.k0 > k_hold]  # next hold: fresh
+            ahead_ms.append((k_hold - 1 - k_recv) * h.cfg.machine.dt * 1e3)
+            time.sleep(0.8)  # at rest
+            assert h.command("resume").ok
+            time.sleep(1.5)  # back to speed
+        return {"method": method, "holds": holds, "ahead_ms": ahead_ms,
+                "ahead_ms_median": float(np.median(ahead_ms)),
+                "lead_ms": h.cfg.service.lead_s * 1e3}
+    finally:
+        h.close()
+
+
 def long_job(method: str = "lp", circuits: int = 45, chunk: int = 500) -> dict:
     """A layer through the engine; wall time per 20 s of motion and of a status() call."""
     cfg = default_config()
@@ -196,6 +231,8 @@ def main() -> int:
     print(out["realtime_factor_tube_9570_fast"], flush=True)
     out["cpu_share_realtime"] = {m: cpu_share(m) for m in ("heuristic", "lp")}
     print(out["cpu_share_realtime"], flush=True)
+    out["hold_latency_realtime"] = {m: hold_latency(m) for m in ("heuristic", "lp")}
+    print(out["hold_latency_realtime"], flush=True)
     if not args.quick:
         out["layer_engine"] = long_job()
         print(out["layer_engine"], flush=True)

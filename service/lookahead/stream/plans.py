@@ -157,11 +157,18 @@ def plan_checked(planner: Planner, request: PlanRequest, k_plan: int, tail: np.n
 
 
 def shortest_stop(planner: Planner, base: PlanRequest, k_plan: int, tail: np.ndarray,
-                  check_limits: AxisLimits, s_max: float, iterations: int = 10
-                  ) -> CommittedPlan | None:
+                  check_limits: AxisLimits, s_max: float, iterations: int = 10,
+                  rel_tol: float = 0.02) -> CommittedPlan | None:
     """The stop (to rest) nearest to base.start.s found by bisection on s_end in
-    (start.s, s_max]; None if even s_max fails (the caller keeps its current plan, which
-    already ends at rest at s_max)."""
+    (start.s, s_max], at most `iterations` halvings and none once the bracket is within
+    `rel_tol` of the stop distance; None if even s_max fails (the caller keeps its current
+    plan, which already ends at rest at s_max).
+
+    The tolerance trades a stop up to 2 % longer for time: the stop is computed while the
+    machine runs on what is buffered, and the service buffers 1.5x its slowest computation
+    ahead, which is what delays a hold. Measured on tube-9570 at full feed (LP plan): the
+    halvings below 2 % were infeasible trials (~19 ms each against ~4 ms for a feasible
+    one); the stop ends at 120.47 mm instead of 120.16-120.47 and takes 70 ms, not 106."""
     s0 = base.start.s
     if base.start.v <= 0 and abs(base.start.a) <= 0:
         return rest_plan(base.path, s0, k_plan)
@@ -192,6 +199,8 @@ def shortest_stop(planner: Planner, base: PlanRequest, k_plan: int, tail: np.nda
         if best is None:
             return None
     for _ in range(iterations):
+        if hi - lo <= rel_tol * (hi - s0):
+            break
         mid = 0.5 * (lo + hi)
         trial = attempt(mid)
         if trial is None:
