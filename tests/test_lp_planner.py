@@ -218,3 +218,40 @@ def test_reachable_q_matches_a_simulated_scurve_from_moving_states():
         s = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
         np.testing.assert_allclose(np.sqrt(reachable_q(d, v0, a0, J, A)), np.interp(d, s, v),
                                    atol=1e-4)
+
+
+class _FailsOnce(LPPlanner):
+    """An LP planner whose `n`-th plan call fails (a window the solver could not do)."""
+
+    def __init__(self, n: int) -> None:
+        super().__init__()
+        self.calls, self.fail_at = 0, n
+
+    def plan(self, request, fixed_head=None):
+        self.calls += 1
+        if self.calls == self.fail_at:
+            raise PlanningError("lp: injected failure")
+        return super().plan(request, fixed_head)
+
+
+def test_a_failed_window_falls_back_to_the_last_stopping_tail(whole, path):
+    """When a window fails, the machine runs out the previous window's plan to rest at that
+    window's end and planning restarts from rest there: the job still ends at s_end,
+    within the limits, with one stop more."""
+    req, res = whole
+    win = WindowedLP(planner=_FailsOnce(2), window_s=700.0).plan(req)
+    assert win.info["fallbacks"] == 1
+    steps = win.info["steps"]
+    stop = next(st for st in steps if st.fallback)
+    prof = win.profile
+    s_end = prof.state_at(prof.duration).s
+    assert s_end == pytest.approx(path.length, abs=1e-6)
+    # the machine is at rest where the first window ended (its stopping tail ran out)
+    knots = prof.s_of_t.x - prof.s_of_t.x[0]
+    s, v, a, _ = prof.at(knots)
+    at_stop = np.argmin(np.abs(s - stop.s_start))
+    assert s[at_stop] == pytest.approx(stop.s_start, abs=1e-9)
+    assert (v[at_stop], a[at_stop]) == pytest.approx((0.0, 0.0), abs=1e-9)
+    assert stop.s_start == pytest.approx(steps[0].s_window_end, abs=1e-6)
+    assert checker_ok(path, prof).violations == 0
+    assert prof.duration > res.profile.duration  # the extra stop costs time
