@@ -255,3 +255,18 @@ def test_a_failed_window_falls_back_to_the_last_stopping_tail(whole, path):
     assert stop.s_start == pytest.approx(steps[0].s_window_end, abs=1e-6)
     assert checker_ok(path, prof).violations == 0
     assert prof.duration > res.profile.duration  # the extra stop costs time
+
+
+@pytest.mark.parametrize("v_end", [50.0, 300.0])
+def test_ends_at_a_given_feed_with_zero_acceleration_and_can_be_continued(path, v_end):
+    """A plan to a given feed ends there with path acceleration 0 (like the heuristic's
+    segment ends), so a plan from that state can continue; stitched, both pass the checker.
+    (Ending with the backward-slope acceleration, the plan to 100 mm/s here ended braking at
+    -4060 mm/s^2 and no plan could continue from it.)"""
+    req = PlanRequest(path, LIMITS, PathState(0.0), 0.6 * path.length, v_end=v_end)
+    first = LPPlanner().plan(req)
+    end = first.profile.state_at(first.profile.duration)
+    assert (end.s, end.v, end.a) == pytest.approx((req.s_end, v_end, 0.0), abs=1e-6)
+    rest = LPPlanner().plan(replace(req, start=end, s_end=path.length, v_end=0.0))
+    stitched = concatenate([first.profile, rest.profile])
+    assert checker_ok(path, stitched).violations == 0

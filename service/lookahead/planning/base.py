@@ -78,7 +78,8 @@ class PlanRequest:
 
     feed_cap: optional cap on the feed (segment `feed` fields, override).
     dt: the sample time the result will be sampled at (for C1-knot feed caps).
-    v_end: feed at s_end; 0 means come to rest exactly at s_end.
+    v_end: feed at s_end, reached with path acceleration 0 (so that a plan from there can
+    continue); 0 means come to rest exactly at s_end.
     """
 
     path: Path

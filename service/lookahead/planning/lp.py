@@ -31,6 +31,7 @@ from lookahead.planning.lp_rows import (
     Rows,
     acceleration_rows,
     end_acceleration_rows,
+    end_slope_row,
     free_rows,
     jerk_change_rows,
     jerk_rows,
@@ -296,7 +297,7 @@ class LPPlanner:
             plan = self.solve_grid(request, geo, tight, stop_idx, head, start_q=plan.q,
                                    passes=1, start_envelope=seam is None)
             repairs += 1
-        a_end = 0.0 if request.v_end <= REST else None
+        a_end = 0.0  # at rest, or at v_end with path acceleration 0
         self._last = LastPlan(request, geo, plan.q, node_accelerations(s, plan.q, a_start, a_end),
                               tight, stop_idx, full)
         info = {
@@ -414,8 +415,9 @@ class LPPlanner:
             q_lo[i] = val
             q_hi[i] = max(val, 0.0)
         base = [acceleration_rows(geo, lim.amax, tight.acc)]
-        if request.v_end > REST:
+        if request.v_end > REST:  # ends moving: at the feed v_end, path acceleration 0
             base.append(end_acceleration_rows(geo, lim.amax, float(tight.acc[-1])))
+            base.append(end_slope_row(geo, 0.0))
         if request.start.v > REST and fixed_head is None:
             base.append(start_slope_row(geo, request.start.a))
         weight = np.gradient(geo.s)
@@ -521,8 +523,8 @@ class LPPlanner:
         if include_start:
             Jn, An = factors(s[0])
             env = reachable_q(s - s[0], request.start.v, a0, Jn, max(An, a0 + 1e-6 * abs(a0)))
-        if request.v_end <= REST:
-            env = np.minimum(env, reachable_q(s[-1] - s, 0.0, 0.0, *factors(s[-1])))
+        # the way into the end state (rest, or v_end with path acceleration 0) backwards
+        env = np.minimum(env, reachable_q(s[-1] - s, request.v_end, 0.0, *factors(s[-1])))
         for i in stop_idx:
             env = np.minimum(env, reachable_q(np.abs(s - s[i]), 0.0, 0.0, *factors(s[i])))
         return env
@@ -561,8 +563,7 @@ class LPPlanner:
         tight.jerk[:k] = 1.0
 
     def _profile(self, request: PlanRequest, plan: GridPlan, a_start: float) -> FeedProfile:
-        a_end = 0.0 if request.v_end <= REST else None
-        return profile_from_grid(plan.s, plan.q, a_start, a_end)
+        return profile_from_grid(plan.s, plan.q, a_start, 0.0)  # ends with acceleration 0
 
     @staticmethod
     def _tighten(tight: Tightening, ratios: SampledRatios, profile: FeedProfile,

@@ -188,6 +188,14 @@ def start_slope_row(geo: GridGeometry, a0: float) -> Rows:
     return Rows(sp.csr_matrix(A), np.array([a0]), np.array([a0]))
 
 
+def end_slope_row(geo: GridGeometry, a_end: float) -> Rows:
+    """q'(s_N) / 2 = a_end: the plan ends with path acceleration a_end (backward slope)."""
+    n = geo.n_nodes
+    A = np.zeros((1, n))
+    A[0, -3:] = 0.5 * backward_slope_weights(geo.s)
+    return Rows(sp.csr_matrix(A), np.array([a_end]), np.array([a_end]))
+
+
 def jerk_operator(geo: GridGeometry, axis: int) -> tuple[np.ndarray, np.ndarray]:
     """Coefficients of L_k(q) = x''' q + 3/2 x'' q' + 1/2 x' q'' at the interior nodes.
 
