@@ -133,11 +133,13 @@ class Engine:
         m = config.machine
         self.config = config
         self.planner = planner
-        if stop_planner is None:
-            from lookahead.planning.heuristic import HeuristicPlanner
+        from lookahead.planning.heuristic import HeuristicPlanner
 
+        if stop_planner is None:
             stop_planner = HeuristicPlanner(margin=1.0)
         self.stop_planner = stop_planner
+        #: the shortest-stop search's first try (fast-failing trials, `_begin_stop`)
+        self.stop_search_planner = HeuristicPlanner(margin=1.0, brake_within_limits=False)
         self.realtime = realtime
         self.dt = m.dt
         self.axes = tuple(m.axes)
@@ -465,8 +467,13 @@ class Engine:
                                  plan.s_end, iterations=6)
         if stop is None:
             base = PlanRequest(plan.path, full, state, plan.s_end, 0.0, None, self.dt)
-            stop = shortest_stop(self.stop_planner, base, k_last, job.tail, self.limits,
-                                 plan.s_end)
+            # trials that fail fast first; the full stop planner if none succeeds (a
+            # state beyond the limits, during an override's transition)
+            for planner in (self.stop_search_planner, self.stop_planner):
+                stop = shortest_stop(planner, base, k_last, job.tail, self.limits,
+                                     plan.s_end)
+                if stop is not None:
+                    break
         if stop is not None:
             job.plan = stop
             self.plan_ms = stop.compute_s * 1e3
