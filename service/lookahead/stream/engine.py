@@ -133,13 +133,15 @@ class Engine:
         m = config.machine
         self.config = config
         self.planner = planner
-        from lookahead.planning.heuristic import HeuristicPlanner
-
+        search_planner = stop_planner
         if stop_planner is None:
+            from lookahead.planning.heuristic import HeuristicPlanner
+
             stop_planner = HeuristicPlanner(margin=1.0)
+            search_planner = HeuristicPlanner(margin=1.0, brake_within_limits=False)
         self.stop_planner = stop_planner
         #: the shortest-stop search's first try (fast-failing trials, `_begin_stop`)
-        self.stop_search_planner = HeuristicPlanner(margin=1.0, brake_within_limits=False)
+        self.stop_search_planner = search_planner
         self.realtime = realtime
         self.dt = m.dt
         self.axes = tuple(m.axes)
@@ -469,7 +471,7 @@ class Engine:
             base = PlanRequest(plan.path, full, state, plan.s_end, 0.0, None, self.dt)
             # trials that fail fast first; the full stop planner if none succeeds (a
             # state beyond the limits, during an override's transition)
-            for planner in (self.stop_search_planner, self.stop_planner):
+            for planner in dict.fromkeys((self.stop_search_planner, self.stop_planner)):
                 stop = shortest_stop(planner, base, k_last, job.tail, self.limits,
                                      plan.s_end)
                 if stop is not None:
