@@ -55,7 +55,8 @@ MAX_SLEEP_S = 0.01
 #: fast mode: batches published between two looks at commands and status
 FAST_BURST = 50
 #: real-time mode: produce at least this far ahead of publication, plus 1.5 x the longest
-#: batch computation seen (a replan), at most MAX_AHEAD_S (s)
+#: batch computation seen (a replan or a stop; a job's first batch does not count), at most
+#: MAX_AHEAD_S (s)
 MIN_AHEAD_S = 0.05
 MAX_AHEAD_S = 1.0
 #: how long a command query waits for the main loop (s)
