@@ -14,7 +14,11 @@ STAMP="$VENV/.lookahead-installed"
 WANT="$(sha256sum "$ROOT/pyproject.toml" | cut -d' ' -f1)"
 if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$WANT" ]; then
     "$PY" -m pip install --quiet --disable-pip-version-check --upgrade pip >&2
-    "$PY" -m pip install --quiet --disable-pip-version-check -e "$ROOT[test,bench]" >&2
+    # setuptools' "Editable installation ... be careful with folders named like your
+    # package" is information, not a problem (our packages live under service/ and clients/);
+    # only that message is silenced, deprecation warnings still show
+    PYTHONWARNINGS="ignore:Editable installation" \
+        "$PY" -m pip install --quiet --disable-pip-version-check -e "$ROOT[test,bench]" >&2
     echo "$WANT" > "$STAMP"
 fi
 export PY ROOT

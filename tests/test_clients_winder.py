@@ -150,7 +150,10 @@ class FakePlanner:
         from lookahead_clients.busio import wait_for_token
 
         assert wait_for_token(self.session, key(self.cfg.ns, "alive", "machine"), 10.0)
-        time.sleep(0.3)  # the winder's subscription reaches us
+        deadline = time.monotonic() + 10.0
+        while not self.pub.matching_status.matching:  # the winder's subscription reaches us
+            assert time.monotonic() < deadline, "the winder never subscribed"
+            time.sleep(0.02)
 
     def send(self, batch_list):
         for b in batch_list:

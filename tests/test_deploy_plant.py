@@ -191,7 +191,12 @@ def test_access_control_only_the_planner_puts_setpoints(tmp_path: Path) -> None:
     got: list[tuple[str, bytes]] = []
     sub = winder.declare_subscriber("lookahead/w/**", zenoh.handlers.FifoChannel(64))
     try:
-        time.sleep(0.5)
+        probe = intruder.declare_publisher("lookahead/w/segments")
+        deadline = time.monotonic() + 10
+        while not probe.matching_status.matching:  # the winder's subscription reached it
+            assert time.monotonic() < deadline, "the winder's subscription never arrived"
+            time.sleep(0.02)
+        probe.undeclare()
         planner.put("lookahead/w/setpoints", b"planner")
         intruder.put("lookahead/w/setpoints", b"intruder")
         intruder.put("lookahead/w/segments", b"segments")
