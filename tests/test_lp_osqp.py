@@ -13,8 +13,8 @@ from lookahead.geometry import fit_points
 from lookahead.geometry.winding import preset_points
 from lookahead.planning.base import PathState, PlanningError, PlanRequest
 from lookahead.planning.lp import LPPlanner
-from lookahead.planning.lp_rows import Rows
-from lookahead.planning.lp_solve import HighsBackend, OsqpBackend, ScaledLP
+from lookahead.planning.lp.rows import Rows
+from lookahead.planning.lp.solve import HighsBackend, OsqpBackend, ScaledLP
 from lookahead.sampling import sample_plan
 
 

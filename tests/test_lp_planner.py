@@ -12,18 +12,18 @@ from lookahead.checker import check_positions
 from lookahead.config import default_config
 from lookahead.geometry.spline_path import fit_points
 from lookahead.planning.base import PathState, PlanningError, PlanRequest
-from lookahead.planning.grid_profile import consistent_durations, grid_time
 from lookahead.planning.lp import LPPlanner, Tightening
-from lookahead.planning.lp_envelope import reachable_q
-from lookahead.planning.lp_rows import (
+from lookahead.planning.lp.envelope import reachable_q
+from lookahead.planning.lp.profile import consistent_durations, grid_time
+from lookahead.planning.lp.rows import (
     GridGeometry,
     fd_weights,
     jerk_rows,
     nodal_acceleration,
     nodal_jerk,
 )
+from lookahead.planning.lp.window import WindowedLP
 from lookahead.planning.profile_ops import concatenate, slice_profile
-from lookahead.planning.window import WindowedLP
 from lookahead.sampling import sample_plan
 
 MACHINE = default_config().machine

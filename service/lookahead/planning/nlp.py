@@ -23,7 +23,7 @@ Start guess: the start plan's q fitted (least squares, seam states imposed), the
 control points not tied to a seam scaled down until the rows hold (bisection).
 
 Result: per window, one quintic in t per fine-grid interval with the exact nodal state
-(s, sqrt(q), q'/2) (`grid_profile`), so s(t) is C2; each window is checked by sampling at
+(s, sqrt(q), q'/2) (`lp.profile`), so s(t) is C2; each window is checked by sampling at
 several phases and its margins tightened and re-solved where it breaks a limit; the
 stitched profile is judged by the finite-difference checker and, if it fails, the start
 plan is returned instead (`info["fallback"]`).
@@ -49,8 +49,8 @@ from lookahead.planning.base import (
     PlanRequest,
     PlanResult,
 )
-from lookahead.planning.grid_profile import interval_durations, quintic_coefficients
-from lookahead.planning.lp_envelope import braking_distance, path_limits
+from lookahead.planning.lp.envelope import braking_distance, path_limits
+from lookahead.planning.lp.profile import interval_durations, quintic_coefficients
 from lookahead.planning.profile_ops import concatenate, slice_profile
 from lookahead.planning.sampled_check import SampledRatios
 from lookahead.sampling import sample_plan
@@ -587,7 +587,7 @@ def window_peaks(path: Path, profile: FeedProfile, limits: AxisLimits, dt: float
 # --- profiles ---------------------------------------------------------------------------
 def hermite_profile(s: np.ndarray, v: np.ndarray, a: np.ndarray) -> FeedProfile:
     """C2 s(t) through the nodal states (s_i, v_i, a_i): one quintic per interval, the
-    duration from `grid_profile.interval_durations`."""
+    duration from `lp.profile.interval_durations`."""
     h = np.diff(s)
     T = interval_durations(h, v, a)
     c3, c4, c5 = quintic_coefficients(T, h, v[:-1], a[:-1], v[1:], a[1:])

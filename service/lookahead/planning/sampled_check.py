@@ -17,7 +17,7 @@ from scipy.interpolate import CubicHermiteSpline
 from lookahead.geometry.base import Path
 from lookahead.limits import AxisLimits
 from lookahead.planning.base import FeedProfile
-from lookahead.planning.lp_rows import GridGeometry, s_derivatives
+from lookahead.planning.lp.rows import GridGeometry, s_derivatives
 
 
 def sample_times(duration: float, dt: float, hold: int = 3) -> np.ndarray:

@@ -70,6 +70,19 @@ class GridGeometry:
                             cat(head.sigma, tail.sigma))
 
 
+@dataclass
+class Tightening:
+    """Per-node factors (<= 1) on the velocity, acceleration and jerk limits."""
+
+    vel: np.ndarray
+    acc: np.ndarray
+    jerk: np.ndarray
+
+    @classmethod
+    def uniform(cls, n: int, vel: float, acc: float, jerk: float) -> Tightening:
+        return cls(np.full(n, vel), np.full(n, acc), np.full(n, jerk))
+
+
 @dataclass(frozen=True)
 class Rows:
     """Linear rows lower <= A q <= upper in the unscaled variables q (A is CSR)."""

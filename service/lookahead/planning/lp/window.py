@@ -26,9 +26,9 @@ from lookahead.planning.base import (
     PlanRequest,
     PlanResult,
 )
-from lookahead.planning.lp import LPPlanner
-from lookahead.planning.lp_envelope import braking_distance, path_limits
-from lookahead.planning.lp_rows import GridGeometry, velocity_caps
+from lookahead.planning.lp.envelope import braking_distance, path_limits
+from lookahead.planning.lp.planner import LPPlanner
+from lookahead.planning.lp.rows import GridGeometry, velocity_caps
 from lookahead.planning.profile_ops import concatenate, slice_profile
 
 

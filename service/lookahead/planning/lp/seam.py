@@ -2,7 +2,7 @@
 
 The service replans from the state of a published sample, which lies on the plan in
 force. The LP keeps that plan's grid, tightening and q up to a seam node and solves only
-the rest (`lp.LPPlanner.plan`). This module finds the seam (`find_seam`), checks that a
+the rest (`lp.planner.LPPlanner.plan`). This module finds the seam (`find_seam`), checks that a
 new path object agrees with the old one where nodes are reused (`same_stretch`: the
 streaming fit hands out a new object whenever points arrive, with its final part
 unchanged), and joins a kept head of the last plan to a new tail (`join_last`).
@@ -12,7 +12,6 @@ Arc lengths s are in path units, times in seconds, q = (ds/dt)^2.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.interpolate import PPoly
@@ -20,12 +19,9 @@ from scipy.interpolate import PPoly
 from lookahead.geometry.base import Path
 from lookahead.limits import AxisLimits
 from lookahead.planning.base import FeedProfile, PlanRequest
-from lookahead.planning.lp_envelope import braking_distance, path_limits
-from lookahead.planning.lp_rows import GridGeometry, velocity_caps
+from lookahead.planning.lp.envelope import braking_distance, path_limits
+from lookahead.planning.lp.rows import GridGeometry, Tightening, velocity_caps
 from lookahead.planning.profile_ops import concatenate
-
-if TYPE_CHECKING:
-    from lookahead.planning.lp import Tightening
 
 #: feeds below this (path units / s) count as rest
 REST = 1e-9

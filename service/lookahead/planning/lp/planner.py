@@ -3,10 +3,21 @@
 Pass 0 solves the velocity + acceleration LP; later passes add the jerk rows linearized
 at the last solution (tangent of J / sqrt(q), conservative at the nodes) and stop when
 the travel time no longer improves. The grid solution becomes a C2 quintic profile
-(`grid_profile`), whose continuous axis velocity, acceleration and jerk are checked every
+(`lp.profile`), whose continuous axis velocity, acceleration and jerk are checked every
 dt/2 (`sampled_check.analytic_ratios`, a bound on the checker's finite differences);
 where it breaks a limit (between nodes the jerk can overshoot), the rows of the nearby
 nodes are tightened and one jerk pass is solved again (the repair loop).
+
+Feasibility (issue 13): q = 0 satisfies every velocity, acceleration, jerk and jerk-change
+row, so from rest to rest every LP here is feasible; what can make it infeasible is what
+fixes q away from 0: a moving start (its slope row and first nodes), a seam's fixed nodes,
+a moving end, and lower bounds. Lower bounds are never imposed: the stall floors of
+`_unstall` are tried and dropped when infeasible. The grid is refined where the path bends
+sharply (`refine`), so the nodal rows see a near-cusp; a near-reversal too sharp for
+any grid (`lp.grid.near_reversals`) becomes a rest node, like a corner. A repair loop far
+from converging gives up early (HOPELESS_RATIO). A moving start or seam that still
+fails goes, in this order, to: a smaller kept head of the last plan, a cold plan from the
+start state, then the caller (the engine's stop planner, counted as a fallback).
 """
 
 from __future__ import annotations
@@ -19,16 +30,23 @@ import numpy as np
 from lookahead.geometry.base import Path
 from lookahead.limits import AxisLimits
 from lookahead.planning.base import FeedProfile, PlanningError, PlanRequest, PlanResult
-from lookahead.planning.grid_profile import (
+from lookahead.planning.lp.envelope import braking_distance, path_limits, reachable_q
+from lookahead.planning.lp.grid import (
+    build_grid,
+    extend_grid,
+    feature_steps,
+    near_reversals,
+    refine_grid,
+)
+from lookahead.planning.lp.profile import (
     grid_time,
     node_accelerations,
     profile_from_grid,
 )
-from lookahead.planning.lp_envelope import braking_distance, path_limits, reachable_q
-from lookahead.planning.lp_grid import build_grid, extend_grid
-from lookahead.planning.lp_rows import (
+from lookahead.planning.lp.rows import (
     GridGeometry,
     Rows,
+    Tightening,
     acceleration_rows,
     end_acceleration_rows,
     end_slope_row,
@@ -38,7 +56,7 @@ from lookahead.planning.lp_rows import (
     start_slope_row,
     velocity_caps,
 )
-from lookahead.planning.lp_seam import (
+from lookahead.planning.lp.seam import (
     FIXED_NODES,
     REST,
     LastPlan,
@@ -46,22 +64,10 @@ from lookahead.planning.lp_seam import (
     find_seam,
     join_last,
 )
-from lookahead.planning.lp_solve import ScaledLP, make_backend
+from lookahead.planning.lp.solve import ScaledLP, make_backend
+from lookahead.planning.place import PlacedPlanningError
 from lookahead.planning.profile_ops import slice_profile
 from lookahead.planning.sampled_check import SampledRatios, analytic_ratios
-
-
-@dataclass
-class Tightening:
-    """Per-node factors (<= 1) on the velocity, acceleration and jerk limits."""
-
-    vel: np.ndarray
-    acc: np.ndarray
-    jerk: np.ndarray
-
-    @classmethod
-    def uniform(cls, n: int, vel: float, acc: float, jerk: float) -> Tightening:
-        return cls(np.full(n, vel), np.full(n, acc), np.full(n, jerk))
 
 
 @dataclass
@@ -78,6 +84,26 @@ class GridPlan:
 
 #: a failed plan from scratch is tried on finer grids up to this many intervals
 MAX_REFINED_NODES = 256
+#: a plan from scratch whose repairs did not converge is tried once more with the jerk
+#: margin times this (measured: a butterfly window stuck at +0.4 % jerk after 8 repairs
+#: planned with 0.85 -> 0.75; scaling the repaired factors instead made it +1.6 %)
+RETRY_JERK_MARGIN = 0.88
+#: a repair loop still above HOPELESS_RATIO x a limit after HOPELESS_AFTER repairs gives
+#: up (the next fallback in `plan` / `_plan_cold` follows): measured on the fast corpus,
+#: every loop that converged stayed below 4.5 x (c-rand6-scales, c-fourier-xc) while the
+#: ones that never converged were at 11-2300 x (c-cycloid-near-cusp, c-corners-bspline-2d)
+#: and spent up to 9 s in their remaining repairs; same plans, same fallbacks
+HOPELESS_RATIO = 10.0
+HOPELESS_AFTER = 2
+#: samples per nominal grid step on which `LPPlanner.refine` judges the path's bends
+FEATURE_SAMPLES = 4
+#: `_unstall`'s time-gradient reference: q floored at this fraction of its upper bound
+#: (smaller values a stalled node more; 1e-3 lifted every stall of the issue-13 Fourier
+#: and butterfly paths, which 1e-9 .. q_hi weights left at 0)
+STALL_REF = 1e-3
+#: floor attempts in `_unstall` (each one 4x lower after an infeasible one)
+STALL_FLOOR_TRIES = 4
+
 def default_grid_step(path: Path, limits: AxisLimits, interval_s: float = 0.0045) -> float:
     """Grid spacing: the distance covered in `interval_s` at the fastest feed the axis
     velocity limits could allow (path units)."""
@@ -102,6 +128,17 @@ def c1_knot_caps(path: Path, s: np.ndarray, limits: AxisLimits, dt: float) -> np
         sl = slice(max(lo - 2, 0), min(lo + 2, s.size))
         caps[sl] = np.minimum(caps[sl], v)
     return caps
+
+
+def worst_place(ratios: SampledRatios, profile: FeedProfile) -> tuple[str, float]:
+    """The limit kind (velocity, acceleration, jerk) a checked profile exceeds most, and
+    the arc length where it does (path units; `profile` times from its start)."""
+    kinds = (("velocity", ratios.vel, ratios.t_vel), ("acceleration", ratios.acc, ratios.t_acc),
+             ("jerk", ratios.jerk, ratios.t_jerk))
+    peaks = [float(np.max(r)) if np.size(r) else -np.inf for _, r, _ in kinds]
+    name, r, t = kinds[int(np.argmax(peaks))]
+    t_bad = float(np.asarray(t)[int(np.argmax(r))])
+    return name, float(profile.at(np.array([t_bad]))[0, 0])
 
 
 class LPPlanner:
@@ -155,7 +192,7 @@ class LPPlanner:
         self.seam_va_pass = seam_va_pass
         self.seam_jerk_change = seam_jerk_change
         self._last: LastPlan | None = None
-        self._corners: tuple[Path, np.ndarray] | None = None
+        self._corners: tuple[Path, float, np.ndarray] | None = None
         self.free_start_nodes = free_start_nodes
         self.envelope_margin = envelope_margin
         self.zone_pad = zone_pad
@@ -177,7 +214,7 @@ class LPPlanner:
 
         A request that starts on this planner's last plan (same limits, a path that
         agrees with the last one where nodes are reused, the state at start.s equal to
-        the plan's to rounding: the service's replans; `lp_seam.find_seam`)
+        the plan's to rounding: the service's replans; `seam.find_seam`)
         continues it (`Seam`): first keeping the last plan up to one braking distance
         before the nearer window end and solving only the rest (`_plan_frozen`, as the
         windowed LP commits), then keeping half of that, then re-solving all but the
@@ -185,8 +222,8 @@ class LPPlanner:
         t0 = time.perf_counter()
         seam = self.find_seam(request) if fixed_head is None and self.reuse else None
         result = None
+        last = self._last
         if seam is not None:
-            last = self._last
             for attempt in (self._plan_frozen, self._plan_half_frozen, self._plan_seam):
                 try:
                     result = attempt(request, seam)
@@ -198,7 +235,8 @@ class LPPlanner:
         return PlanResult(result.profile, self.name, time.perf_counter() - t0, result.info)
 
     def _plan_cold(self, request: PlanRequest, fixed_head: np.ndarray | None) -> PlanResult:
-        """A plan from scratch; if one from rest fails on a short stretch, again on grids
+        """A plan from scratch; if it fails, once more with the jerk margin times
+        RETRY_JERK_MARGIN; if one from rest still fails on a short stretch, again on grids
         2x, 4x, ... finer while they have at most `MAX_REFINED_NODES` intervals: a stretch
         of a few grid steps (short paths) is resolved by too few nodes for the jerk rows between
         its start and stop S-curves (measured: 35-100 mm fits and B-spline pieces)."""
@@ -206,10 +244,18 @@ class LPPlanner:
         h = self.grid_step or default_grid_step(request.path, request.limits)
         try:
             return self._plan(request, fixed_head, None)
+        except PlanningError as exc:
+            first_error = exc
+        margins = self.margins
+        try:  # repairs that did not converge: once more with a smaller jerk margin
+            self.margins = (margins[0], margins[1], margins[2] * RETRY_JERK_MARGIN)
+            return self._plan(request, fixed_head, None)
         except PlanningError:
             if (fixed_head is not None or request.start.v > REST
                     or length / (h / 2.0) > MAX_REFINED_NODES):
-                raise  # a moving start has the caller's fallback; no time to refine
+                raise first_error from None  # a moving start: the caller's fallback
+        finally:
+            self.margins = margins
         finer = h / 2.0
         while True:
             try:
@@ -248,7 +294,7 @@ class LPPlanner:
         self._last = None
 
     def find_seam(self, request: PlanRequest) -> Seam | None:
-        """The seam with the last plan if the request starts on it (`lp_seam.find_seam`)."""
+        """The seam with the last plan if the request starts on it (`seam.find_seam`)."""
         return find_seam(self._last, request)
 
     def _plan(self, request: PlanRequest, fixed_head: np.ndarray | None,
@@ -288,11 +334,12 @@ class LPPlanner:
             worst = ratios.worst
             if worst <= 1.0:
                 break
-            if repairs >= self.max_repairs:
-                raise PlanningError(
-                    f"lp: sampled profile still exceeds the limits by {100 * (worst - 1):.1f} %"
-                    f" after {repairs} repairs"
-                )
+            if repairs >= self.max_repairs or (repairs >= HOPELESS_AFTER
+                                               and worst > HOPELESS_RATIO):
+                kind, s_bad = worst_place(ratios, full)
+                raise PlacedPlanningError(
+                    f"lp: sampled profile still exceeds the {kind} limit by "
+                    f"{100 * (worst - 1):.1f} % after {repairs} repairs", s_bad)
             self._tighten(tight, ratios, full, s, request.dt)
             plan = self.solve_grid(request, geo, tight, stop_idx, head, start_q=plan.q,
                                    passes=1, start_envelope=seam is None)
@@ -341,11 +388,15 @@ class LPPlanner:
         fresh = fresh[fresh <= last.request.s_end - brake]
         return np.concatenate([q, np.interp(fresh, last.geo.s, last.q)])
 
-    def corners(self, path: Path) -> np.ndarray:
-        """path.corners_s(), cached for the last path object (a replan's path)."""
-        if self._corners is None or self._corners[0] is not path:
-            self._corners = (path, np.asarray(path.corners_s(), dtype=float))
-        return self._corners[1]
+    def corners(self, path: Path, h: float) -> np.ndarray:
+        """The rest points: path.corners_s() and the near-reversals the grid of step h
+        cannot resolve (`lp.grid.near_reversals`), cached for the last path object and h
+        (a replan's path)."""
+        if self._corners is None or self._corners[0] is not path or self._corners[1] != h:
+            stops = np.concatenate([np.asarray(path.corners_s(), dtype=float),
+                                    near_reversals(path, h)])
+            self._corners = (path, h, np.unique(stops))
+        return self._corners[2]
 
     def geometry(self, path: Path, s: np.ndarray) -> GridGeometry:
         """Path derivatives at the nodes s (`GridGeometry.sample`)."""
@@ -360,12 +411,13 @@ class LPPlanner:
         old_stops = last.stop_idx[(last.stop_idx > seam.first)
                                   & (last.stop_idx < seam.first + seam.n_reuse)] - seam.first
         h = self.grid_step or default_grid_step(request.path, request.limits)
-        corners = self.corners(request.path)
+        corners = self.corners(request.path, h)
         if seam.reuses_all:  # the same end: no fresh nodes
             geo, stop_idx = last.geo.take(reused), old_stops
         else:
             s, stop_idx = extend_grid(last.geo.s[reused], float(request.s_end), h,
                                       request.v_end <= REST, corners, old_stops)
+            s, stop_idx = self.refine(request.path, s, stop_idx, h, first=seam.n_reuse - 1)
             geo = GridGeometry.join(last.geo.take(reused),
                                     self.geometry(request.path, s[seam.n_reuse:]))
         tight = Tightening.uniform(geo.n_nodes, *self.margins)
@@ -383,8 +435,23 @@ class LPPlanner:
         if not s1 > s0:
             raise PlanningError(f"lp: s_end {s1} must exceed start.s {s0}")
         h = grid_step or self.grid_step or default_grid_step(request.path, request.limits)
-        corners = self.corners(request.path)
-        return build_grid(s0, s1, h, request.start.v <= REST, request.v_end <= REST, corners)
+        corners = self.corners(request.path, h)
+        s, stop_idx = build_grid(s0, s1, h, request.start.v <= REST, request.v_end <= REST,
+                                 corners)
+        return self.refine(request.path, s, stop_idx, h)
+
+    def refine(self, path: Path, s: np.ndarray, stop_idx: np.ndarray, h: float,
+               first: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Finer nodes where the path bends sharply (`lp.grid.refine_grid`), from node
+        `first` on, judged on samples FEATURE_SAMPLES per nominal step h apart."""
+        lo, hi = float(s[first]), float(s[-1])
+        if not hi > lo:
+            return s, stop_idx
+        n = int(np.ceil((hi - lo) / h * FEATURE_SAMPLES)) + 1
+        s_feat = np.linspace(lo, hi, n)
+        d = path.eval_s(s_feat, 3)
+        step = feature_steps(s_feat, d[2], d[3], np.asarray(path.path_scale, dtype=float), h)
+        return refine_grid(s, stop_idx, s_feat, step, first)
 
     def solve_grid(
         self,
@@ -461,27 +528,54 @@ class LPPlanner:
         """Re-solve if a free node got q = 0 (an unplanned stop; next to a rest node, an
         interval that never ends). The objective sum(h q) hardly values the small q
         near rest, and on short paths the linearized jerk rows made the LP trade them
-        for the middle (measured: 35-100 mm paths). The re-solve weighs each node by the
-        travel time its feed saves, h / q_hi^(3/2) (the gradient of sum h / sqrt(q) at
-        the upper bounds), which values the nodes near rest; only where that still
-        leaves zeros, their lower bound is raised to `stall_floor` times q_hi."""
+        for the middle (measured: 35-100 mm paths); on wiggly paths (the Fourier and
+        butterfly paths of issue 13) it traded a node in a slow stretch, where the rows
+        let it reach only ~0.1 % of its velocity cap, for the nodes around it.
+
+        Same rows, other objectives, in this order (each LP is feasible: q = 0 is): (1)
+        each node weighed by the travel time its feed saves at the upper bounds,
+        h / q_hi^(3/2); (2) the same gradient of sum h / sqrt(q) at the stalled
+        solution itself (q floored at `STALL_REF` q_hi), which values a stalled node
+        most; (3) a lower bound `stall_floor` q_hi on the stalled nodes, halved while
+        it makes the LP infeasible (a floor is only tried, never imposed: before issue 13
+        an infeasible floor failed the whole window). Returns the first solution
+        without a stall, else the last one (the check then decides)."""
         tiny = 1e-9 * float(np.max(q_hi))
         free = np.ones(q.size, dtype=bool)
         free[list(fixed)] = False
-        if not np.any(free & (q <= tiny)):
+
+        def stalled(x: np.ndarray) -> np.ndarray:
+            return free & (x <= tiny)
+
+        if not np.any(stalled(q)):
             return q
-        timed = weight / np.maximum(q_hi, tiny) ** 1.5
-        timed *= float(np.sum(weight)) / float(np.sum(timed))
-        floor = 0.0
-        for _ in range(3):
-            q = self._solve(plan, timed, q_lo, q_hi, rows, q.size, record=True)
+
+        def timed(ref: np.ndarray) -> np.ndarray:
+            w = weight / np.maximum(ref, tiny) ** 1.5
+            return w * (float(np.sum(weight)) / float(np.sum(w)))
+
+        def solve(w: np.ndarray, lo: np.ndarray) -> np.ndarray:
+            x = self._solve(plan, w, lo, q_hi, rows, q.size, record=True)
             for i, val in fixed.items():
-                q[i] = val
-            stalled = free & (q <= tiny)
-            if not np.any(stalled):
+                x[i] = val
+            return x
+
+        q = solve(timed(q_hi), q_lo)
+        if not np.any(stalled(q)):
+            return q
+        w = timed(np.maximum(q, STALL_REF * q_hi))
+        q = solve(w, q_lo)
+        floor = self.stall_floor
+        for _ in range(STALL_FLOOR_TRIES):
+            bad = stalled(q)
+            if not np.any(bad):
                 break
-            floor = min(2.0 * floor, 0.9) if floor else self.stall_floor
-            q_lo[stalled] = np.maximum(q_lo[stalled], floor * q_hi[stalled])
+            lo = q_lo.copy()
+            lo[bad] = np.maximum(lo[bad], floor * q_hi[bad])
+            try:
+                q = solve(w, lo)
+            except PlanningError:
+                floor *= 0.25
         return q
 
     def _solve(self, plan: GridPlan, weight, q_lo, q_hi, rows: list[Rows], n: int,
@@ -492,7 +586,8 @@ class LPPlanner:
         plan.solver_ms.append(1e3 * (time.perf_counter() - t0))
         plan.statuses.append(out.status)
         if not out.ok:
-            raise PlanningError(f"lp: {self.solver} returned {out.status}")
+            raise PlacedPlanningError(f"lp: {self.solver} returned {out.status}",
+                                      float(plan.s[0]))
         return out.q
 
     def _caps(self, request: PlanRequest, geo: GridGeometry, tight: Tightening) -> np.ndarray:
@@ -506,7 +601,7 @@ class LPPlanner:
     def _envelope(self, request: PlanRequest, geo: GridGeometry, tight: Tightening,
                   stop_idx: np.ndarray, include_start: bool = True) -> np.ndarray:
         """Jerk-limited S-curve bounds on q after the start (unless not `include_start`),
-        before a rest end and around interior stops (`lp_envelope`)."""
+        before a rest end and around interior stops (`lp.envelope`)."""
         A, J = path_limits(request.path, request.limits)
         s = geo.s
         # one S-curve per prescribed state, with the tightest factors of its reach

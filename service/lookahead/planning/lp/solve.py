@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from lookahead.planning.lp_rows import Rows
+from lookahead.planning.lp.rows import Rows
 
 SOLVERS = ("osqp", "highs")
 

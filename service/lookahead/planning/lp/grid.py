@@ -1,0 +1,184 @@
+"""The s-grid of the feed LP: uniform spacing, graded towards the points where the feed is 0.
+
+Near a point of rest the jerk-limited feed grows like q ~ s^(4/3) (s = J t^3 / 6), which a
+uniform grid resolves badly; intervals there start at `h / grade_ratio` and grow
+geometrically to h.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def graded_span(length: float, h: float, grade_start: bool, grade_end: bool,
+                first: float, growth: float = 1.25) -> np.ndarray:
+    """Offsets 0 .. length with spacing ~h, graded from `first` at the flagged ends."""
+    n = max(int(np.ceil(length / h)), 2)
+    ramp = []
+    step = first
+    while step < h and sum(ramp) + step < 0.25 * length:
+        ramp.append(step)
+        step *= growth
+    ramp = np.array(ramp)
+    head = ramp if grade_start else np.empty(0)
+    tail = ramp[::-1] if grade_end else np.empty(0)
+    middle = length - head.sum() - tail.sum()
+    n = max(int(np.ceil(middle / h)), 2)
+    steps = np.concatenate([head, np.full(n, middle / n), tail])
+    offsets = np.concatenate([[0.0], np.cumsum(steps)])
+    offsets[-1] = length
+    return offsets
+
+
+def build_grid(s0: float, s1: float, h: float, rest_start: bool, rest_end: bool,
+               stops: np.ndarray, grade_ratio: float = 25.0) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes from s0 to s1 (path units) and the indices of the nodes at `stops` (rest points
+    strictly inside), every sub-span graded at its rest ends."""
+    stops = np.sort(np.asarray(stops, dtype=float))
+    stops = stops[(stops > s0 + 1e-9) & (stops < s1 - 1e-9)]
+    edges = np.concatenate([[s0], stops, [s1]])
+    pieces, stop_idx, count = [], [], 0
+    for j in range(edges.size - 1):
+        length = edges[j + 1] - edges[j]
+        span_h = min(h, length / 8.0)
+        offs = graded_span(length, span_h, rest_start or j > 0,
+                           rest_end or j < edges.size - 2, span_h / grade_ratio)
+        nodes = edges[j] + offs
+        if j > 0:
+            nodes = nodes[1:]
+            stop_idx.append(count - 1)
+        pieces.append(nodes)
+        count += nodes.size
+    return np.concatenate(pieces), np.array(stop_idx, dtype=int)
+
+
+def extend_grid(head: np.ndarray, s1: float, h: float, rest_end: bool, stops: np.ndarray,
+                head_stops: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A replan's grid: the reused nodes `head` (with rest-point indices `head_stops`),
+    then fresh nodes from head[-1] to s1 (path units) as `build_grid` places them."""
+    tail, tail_stops = build_grid(float(head[-1]), s1, h, False, rest_end, stops)
+    nodes = np.concatenate([head, tail[1:]])
+    return nodes, np.concatenate([head_stops, tail_stops + head.size - 1]).astype(int)
+
+
+#: wanted node spacing as a fraction of the local feature length (1 / curvature in the
+#: path metric, and 1 / sqrt(|x_sss|)): trades LP size for resolving sharp bends.
+#: Measured through the engine on issue 13's paths (fallbacks, Fourier / butterfly):
+#: 0.25 with grading 1.3: 6 / 6; 0.5 with 1.2: 0 / -; 1.0 with 1.15: 0 / 5, the fastest.
+#: The presets' bends (radius >= 100 mm) get no extra nodes.
+FEATURE_STEP = 1.0
+#: the refined spacing is at least this fraction of the nominal one (true cusps are
+#: corners, `Path.corners_s`, where the grid already comes to rest)
+MIN_STEP_FRACTION = 1.0 / 64.0
+
+
+def feature_steps(s: np.ndarray, d2: np.ndarray, d3: np.ndarray, path_scale: np.ndarray,
+                  h: float) -> np.ndarray:
+    """The node spacing wanted at arc lengths s (path units) from the path's s-derivatives
+    x_ss, x_sss (each (n, naxes), axis units) scaled to the path metric by `path_scale`:
+    min(h, FEATURE_STEP / curvature, FEATURE_STEP / sqrt(|x_sss|)), at least
+    MIN_STEP_FRACTION h, taken as the smallest over each sample and its neighbours."""
+    k2 = np.max(np.abs(d2 * path_scale), axis=1)
+    k3 = np.sqrt(np.max(np.abs(d3 * path_scale), axis=1))
+    with np.errstate(divide="ignore"):
+        step = np.minimum(FEATURE_STEP / k2, FEATURE_STEP / k3)
+    step = np.clip(step, MIN_STEP_FRACTION * h, h)
+    step[1:] = np.minimum(step[1:], step[:-1])
+    step[:-1] = np.minimum(step[:-1], step[1:])
+    return step
+
+
+def refine_grid(nodes: np.ndarray, stop_idx: np.ndarray, s_feat: np.ndarray,
+                step: np.ndarray, first: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """More nodes wherever the wanted spacing `step` (given at arc lengths s_feat,
+    increasing, path units) is below an interval's length, from node `first` on; returns
+    the nodes and the shifted indices of the rest nodes `stop_idx`. Nodes before `first`
+    (a seam's reused nodes) and all existing nodes are kept.
+
+    The wanted spacing is first graded (it may grow by at most GRADE_LIMIT - 1 of itself
+    per unit of its own length, both ways), then each interval gets ceil(integral of
+    ds / step) parts placed at equal steps of that integral, so that neighbouring new
+    intervals differ by about GRADE_LIMIT at most. Hand-written: a density-based node
+    placement (two sweeps and an inverse interpolation), which no library offers for a
+    grid with fixed nodes."""
+    if nodes.size < 2 or s_feat.size < 2:
+        return nodes, stop_idx
+    w = graded_steps(s_feat, step)
+    density = 1.0 / w
+    cum = np.concatenate([[0.0], np.cumsum(0.5 * (density[1:] + density[:-1])
+                                           * np.diff(s_feat))])
+    F = np.interp(nodes, s_feat, cum)
+    need = np.diff(F)
+    parts = np.maximum(np.ceil(need - 1e-6).astype(int), 1)
+    parts[:first] = 1
+    parts[np.diff(nodes) <= 0.0] = 1
+    if np.all(parts == 1):
+        return nodes, stop_idx
+    pieces = [nodes[:1]]
+    for j in range(nodes.size - 1):
+        k = parts[j]
+        if k > 1:
+            targets = F[j] + need[j] * np.arange(1, k) / k
+            pieces.append(np.interp(targets, cum, s_feat))
+        pieces.append(nodes[j + 1:j + 2])
+    out = np.concatenate(pieces)
+    offset = np.concatenate([[0], np.cumsum(parts - 1)])
+    return out, (stop_idx + offset[stop_idx]).astype(int)
+
+
+#: largest growth of the refined spacing per unit of its own length (a 2x jump between
+#: neighbouring intervals left a node at q ~ 0 on the B-spline composite of
+#: test_lp_short_paths; see FEATURE_STEP for the measurements)
+GRADE_LIMIT = 1.15
+
+
+def graded_steps(s: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """`step` (at increasing arc lengths s) lowered so that it grows by at most
+    (GRADE_LIMIT - 1) |ds| from any sample to the next, both ways (two running minima)."""
+    slope = GRADE_LIMIT - 1.0
+    # forward: min over j <= i of step_j + slope (s_i - s_j); backward likewise
+    fwd = slope * s + np.minimum.accumulate(step - slope * s)
+    bwd = -slope * s + np.minimum.accumulate((step + slope * s)[::-1])[::-1]
+    return np.minimum(fwd, bwd)
+
+
+#: a turn of the tangent (path metric) by more than this between feature samples marks a
+#: hidden near-reversal (cos of 120 deg)
+REVERSAL_COS = -0.5
+#: points per bracket in the search for a near-reversal's sharpest point (two rounds)
+REVERSAL_SEARCH = 65
+
+
+def near_reversals(path, h: float, samples_per_step: int = 4) -> np.ndarray:
+    """Arc lengths (path units) of near-reversals the grid cannot resolve: the tangent
+    turns by more than 120 deg over one or two samples h / samples_per_step apart, and the
+    sharpest point found in between has a radius of curvature below MIN_STEP_FRACTION h.
+
+    Such a point (c-corners-bspline-2d: a 177 deg turn within 0.45 mm, radius 0.014 mm;
+    c-cycloid-near-cusp) is smooth, so `Path.corners_s` does not list it, but the feed
+    must nearly stop there anyway (x_sss v^3 <= J); the planner makes it a rest node.
+    Samples h / 4 apart do not see the curvature peak itself (it is ~1e-3 of their
+    spacing wide), only the turn of the tangent across it."""
+    n = int(np.ceil(path.length / h * samples_per_step)) + 1
+    if n < 3:
+        return np.empty(0)
+    s = np.linspace(0.0, path.length, n)
+    scale = np.asarray(path.path_scale, dtype=float)
+    t = path.eval_s(s, 1)[1] * scale
+    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
+    # over one and two sample steps: a sample on the sharp point itself splits the turn
+    brackets = [(int(i), int(i) + lag) for lag in (1, 2)
+                for i in np.nonzero(np.sum(t[:-lag] * t[lag:], axis=1) < REVERSAL_COS)[0]]
+    found: list[float] = []
+    for i, i_end in brackets:
+        lo, hi = s[i], s[i_end]
+        if any(lo <= f <= hi for f in found):
+            continue
+        for _ in range(2):
+            x = np.linspace(lo, hi, REVERSAL_SEARCH)
+            k = np.max(np.abs(path.eval_s(x, 2)[2] * scale), axis=1)
+            j = int(np.argmax(k))
+            lo, hi = x[max(j - 1, 0)], x[min(j + 1, x.size - 1)]
+        if k[j] * MIN_STEP_FRACTION * h > 1.0:
+            found.append(float(x[j]))
+    return np.array(found)
