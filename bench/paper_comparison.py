@@ -30,8 +30,8 @@ from lookahead.planning.base import PathState, PlanRequest, PlanResult
 from lookahead.planning.bounds import toppra_time_bound
 from lookahead.planning.heuristic import HeuristicPlanner
 from lookahead.planning.lp import LPPlanner
+from lookahead.planning.lp.window import WindowedLP
 from lookahead.planning.nlp import NLPPlanner
-from lookahead.planning.window import WindowedLP
 from lookahead.sampling import sample_plan
 
 RESULTS = FsPath(__file__).resolve().parent / "results"

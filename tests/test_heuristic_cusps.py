@@ -11,7 +11,7 @@ from lookahead.geometry.spline_path import fit_points
 from lookahead.limits import AxisLimits
 from lookahead.planning.base import PathState, PlanRequest
 from lookahead.planning.heuristic import HeuristicPlanner
-from lookahead.planning.path_limits import BudgetShares, build_grid, s_derivatives_at_u
+from lookahead.planning.heuristic.path_limits import BudgetShares, build_grid, s_derivatives_at_u
 from lookahead.sampling import sample_plan
 from test_heuristic_plans import DT, LIMITS, SCALE
 

@@ -14,7 +14,7 @@ from lookahead.geometry.spline_path import fit_points
 from lookahead.limits import AxisLimits
 from lookahead.planning.base import PathState, PlanningError, PlanRequest
 from lookahead.planning.heuristic import HeuristicPlanner
-from lookahead.planning.scurve import reachable_feed, transition_distance
+from lookahead.planning.heuristic.scurve import reachable_feed, transition_distance
 from lookahead.sampling import sample_plan
 
 MACHINE = default_config().machine

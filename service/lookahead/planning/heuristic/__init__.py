@@ -1,0 +1,18 @@
+"""The heuristic feed planner (paper 3.2, with free junction states) as a package.
+
+Modules, each importing only the ones above it:
+
+- `scurve`: 1-DOF Ruckig S-curves along s, compatibility distances, cutting phases.
+- `profile_build`: constant-jerk phases -> `FeedProfile`; path state at given s.
+- `path_limits`: geometry on a grid of cells, the feed-limit curve, planning segments and
+  their budgets.
+- `verify`: the planner's own check of the axis terms at the grid points.
+- `scan`: forward/backward jerk-limited scans, free junction states, the segment chain.
+- `zero_junctions`: the paper's junctions with path acceleration 0 (the fallback).
+- `brake`: braking a start state that is above the limits.
+- `planner`: `HeuristicPlanner` (rounds of chain, verification and repair).
+"""
+
+from lookahead.planning.heuristic.planner import HeuristicPlanner, plan_rest_to_rest
+
+__all__ = ["HeuristicPlanner", "plan_rest_to_rest"]

@@ -1,0 +1,335 @@
+"""The heuristic planner: S-curves per planning segment with free junction states found by
+a backward jerk-limited scan and a forward chain of rises (critical points), verified and
+repaired, on several layouts of planning segments (the fastest verified plan wins).
+
+1. Geometry on a grid of cells -> feed limit per cell (axis velocity, centripetal
+   acceleration, geometric jerk, C1-knot cap, feed cap); cells grouped into planning
+   segments by bands of that limit (`path_limits`).
+2. Per segment a cruise cap V and path acceleration / jerk budgets A, J that keep every
+   axis term within its limit.
+3. Junction states (feed and path acceleration) from the scans, one motion per planning
+   segment between them (`scan`); where that finds no chain, and as a layout of its own,
+   the paper's junctions with path acceleration 0 (`zero_junctions`). Steps 1-4 run per
+   `Layout` (band ratio, budget shares); the fastest verified profile is returned.
+4. Verification of axis velocity, acceleration and jerk at the budget and check points
+   (`verify`); failing segments get their V, A, J lowered and steps 2-4 repeat. A profile
+   that still fails raises PlanningError (never an unverified profile).
+5. A start above the limits (override down, lower feed cap): first a brake (`brake`), then
+   steps 1-4 from where it ends.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from lookahead.limits import AxisLimits
+from lookahead.planning.base import FeedProfile, PathState, PlanningError, PlanRequest, PlanResult
+from lookahead.planning.heuristic.brake import BRAKE_TARGETS, Brake, phases_end, state_scale
+from lookahead.planning.heuristic.path_limits import (
+    BudgetShares,
+    PathGrid,
+    build_grid,
+    choose_segments,
+    feed_limit,
+    segment_budgets,
+)
+from lookahead.planning.heuristic.profile_build import build_profile, concat_phases
+from lookahead.planning.heuristic.scan import chain, neighbour_min
+from lookahead.planning.heuristic.scurve import (
+    Phases,
+    SCurveSolver,
+    SegmentInfeasibleError,
+    reachable_feed,
+)
+from lookahead.planning.heuristic.verify import failing_segments, sampled_failing_segments
+from lookahead.planning.heuristic.zero_junctions import (
+    first_caps,
+    forward_pass,
+    junction_caps,
+    junction_feeds,
+    zero_junction_parts,
+)
+
+#: repair step: factor on V, A, J of a segment that fails verification (0.85: 1-3 rounds on
+#: the tubes, Fourier and random wandering paths of tests/heuristic_paths.py)
+REPAIR_STEP = 0.85
+#: repair rounds a further layout gets once one has a verified profile (a compute bound:
+#: from a replan's moving start a layout that does not suit it failed all 12 rounds on
+#: the tubes, while 1 round sufficed in every winning case measured)
+OTHER_LAYOUT_ROUNDS = 2
+#: free-junction chains tried per round while leading segments are merged for a start
+#: state that cannot stop in the first one (a compute bound: on a polar dome a replan
+#: merged 60 times, each chain failing, 1.2 s; the merges are for the zero-junction plan)
+FREE_TRIES = 2
+
+
+@dataclass(frozen=True)
+class Layout:
+    """One way to cut the path into planning segments: the band ratio of the feed limit
+    that starts a new segment and the shares of the limits the budgets use."""
+
+    band_ratio: float
+    shares: BudgetShares
+    #: where the free-junction chain finds no motion, plan the paper's junctions (path
+    #: acceleration 0) instead; off for fine bands, where hundreds of zero-acceleration
+    #: junctions make the jerk chatter (Fourier path: 55 sign changes per second, 120 of
+    #: them within 5 ms of the last) and the layout then simply fails
+    zero_fallback: bool = True
+    #: skip the layout when it cuts the window into more planning segments than this
+    #: (None: no limit). A compute bound: the fine layout won only on paths of few long
+    #: segments (tubes: 28-61 segments for a whole circuit) and cost 2-3x the coarse one
+    #: on wiggly paths (300-1100 segments) where it lost anyway
+    max_segments: int | None = None
+    #: False: the paper's junctions (path acceleration 0) only
+    free_junctions: bool = True
+
+
+#: layouts planned in turn, the fastest verified profile wins. Fine bands with most of
+#: amax / jmax for the geometry follow the feed-limit curve closely (on the tubes 2-10 %
+#: faster than the coarse layout, within 0-3 % of the LP); the paper's coarse bands with
+#: more room for path acceleration win on paths of sharp turns (random wandering paths:
+#: 25 % faster than the fine layout); the paper's own zero-acceleration junctions on the
+#: coarse bands are the last candidate, so no plan is slower than theirs (on a corpus CAM
+#: winding path they beat the free chain by 10 %). Measured on tests/heuristic_paths.py
+#: and the corpus's fast set.
+LAYOUTS = (Layout(1.25, BudgetShares()),
+           Layout(1.05, BudgetShares(centripetal=0.9, jerk_geometric=0.5),
+                  zero_fallback=False, max_segments=200),
+           Layout(1.25, BudgetShares(), free_junctions=False))
+
+
+class HeuristicPlanner:
+    """Heuristic planner: free-junction S-curve chain, verification + repair.
+
+    margin: fraction of each axis limit planned to (the checker judges at 1.0).
+    band_ratio, shares: one layout of planning segments (default: `LAYOUTS`, all planned,
+    the fastest verified profile wins; the one that won the last plan is tried first, as
+    a replan continues it); layouts: several.
+    max_cell: longest geometry cell (path units; default path length / 2000).
+    repair_rounds: verification/repair passes before giving up.
+    free_junctions: False plans the paper's junctions (path acceleration 0) only.
+    sampled_verify: after the grid-point check, also the checker's finite differences on
+    the profile sampled at four phases of dt (`verify.sampled_failing_segments`); a
+    profile leaves the planner only if both pass. Off by default: it costs 5-10x the plan
+    (the arc-length inversion of 4 samples per dt); since the velocity share
+    (`BudgetShares.velocity`) the checker found nothing the grid check had passed on
+    tests/heuristic_paths.py and the corpus's fast set, and on a pchip tube its four
+    phases cost 8 % winding time for differences the single-phase checker accepted.
+    brake_within_limits: when the plan from a moving start fails, try the brake fallback
+    (brake, then plan the rest) also if the start state is within the limits. False for a
+    shortest-stop search (`stream.plans.shortest_stop`): its too-short trials then fail in
+    ~2 ms instead of ~20.
+    """
+
+    name = "heuristic"
+
+    def __init__(self, margin: float = 0.98, band_ratio: float | None = None,
+                 max_cell: float | None = None,
+                 shares: BudgetShares | None = None, repair_rounds: int = 12,
+                 brake_within_limits: bool = True, free_junctions: bool = True,
+                 layouts: tuple[Layout, ...] | None = None,
+                 sampled_verify: bool = False) -> None:
+        self.brake_within_limits = brake_within_limits
+        self.sampled_verify = sampled_verify
+        self.margin = margin
+        if layouts is None:
+            layouts = LAYOUTS if band_ratio is None and shares is None else (
+                Layout(band_ratio or 1.25, shares or BudgetShares()),)
+        self.layouts = layouts
+        self.max_cell = max_cell
+        self.shares = shares or BudgetShares()
+        self.repair_rounds = repair_rounds
+        self.free_junctions = free_junctions
+        self._solver = SCurveSolver()
+        self._last_layout = 0
+        self._brake = Brake(self.shares, margin, self._solver)
+
+    # --- public ---------------------------------------------------------------------
+    def plan(self, request: PlanRequest) -> PlanResult:
+        t_start = time.perf_counter()
+        start = request.start
+        s_end = float(request.s_end)
+        if not s_end > start.s:
+            if s_end == start.s and start.v == 0 and start.a == 0:
+                return self._result(_rest_profile(start.s, request.dt), t_start, {"segments": 0})
+            raise PlanningError(f"s_end ({s_end}) must lie after start.s ({start.s})")
+        if start.v < 0 or request.v_end < 0:
+            raise PlanningError("feeds must be >= 0")
+        limits = request.limits.scaled(self.margin)
+        grid, vlim = self._grid(request, start.s, limits)
+        first_problem = ""
+        if not request.start.v > vlim[0] / self.margin:
+            try:
+                phases, core = self._plan_phases(request, grid, vlim, limits)
+                return self._result(build_profile(phases), t_start, core)
+            except PlanningError as exc:
+                if start.v == 0 and start.a == 0:
+                    raise
+                if not self.brake_within_limits and state_scale(request, grid) <= 1.0:
+                    raise
+                first_problem = str(exc)  # perhaps the start acceleration is too high
+        # brake to the limits first; if the rest cannot follow from there (the window is
+        # too short for that feed), brake to a lower feed
+        problem = ""
+        for fraction in BRAKE_TARGETS:
+            brake, g = self._brake.brake(request, grid, vlim, limits, fraction)
+            end = phases_end(brake)
+            if not end.s < s_end:
+                break
+            rest = replace(request, start=end)
+            rest_grid, rest_vlim = self._grid(request, end.s, limits)
+            try:
+                phases, core = self._plan_phases(rest, rest_grid, rest_vlim, limits)
+            except PlanningError as exc:
+                problem = str(exc)
+                continue
+            info = {"brake_scale": g, "brake_target": fraction, **core}
+            return self._result(build_profile(concat_phases([brake, phases])), t_start, info)
+        raise PlanningError("the start state cannot slow down to the limits within the "
+                            f"window [{start.s}, {s_end}]: {first_problem} {problem}")
+
+    # --- steps ------------------------------------------------------------------------
+    def _grid(self, request: PlanRequest, s_begin: float,
+              limits: AxisLimits) -> tuple[PathGrid, np.ndarray]:
+        grid = build_grid(request.path, s_begin, request.s_end, request.dt, limits,
+                          self.shares, request.feed_cap, self.max_cell)
+        return grid, feed_limit(grid, limits, self.shares, request.feed_cap)
+
+    def _plan_phases(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
+                     limits: AxisLimits) -> tuple[Phases, dict]:
+        """The fastest verified profile over the layouts (PlanningError if none is)."""
+        best, problem = None, ""
+        # the layout that won last first (a replan continues its plan); once one layout
+        # has a verified profile, the others get only OTHER_LAYOUT_ROUNDS repair rounds
+        order = sorted(range(len(self.layouts)), key=lambda i: i != self._last_layout)
+        for i in order:
+            layout = self.layouts[i]
+            lim = vlim if layout.shares == self.shares else feed_limit(
+                grid, limits, layout.shares, request.feed_cap)
+            rounds = self.repair_rounds if best is None else min(self.repair_rounds,
+                                                                 OTHER_LAYOUT_ROUNDS)
+            try:
+                phases, info = self._plan_layout(request, grid, lim, limits, layout, rounds)
+            except PlanningError as exc:
+                problem = str(exc)
+                continue
+            duration = float(np.sum(phases.duration))
+            if best is None or duration < best[2]:
+                best = (phases, {**info, "layout": i}, duration)
+        if best is None:
+            raise PlanningError(problem)
+        self._last_layout = best[1]["layout"]
+        return best[0], best[1]
+
+    def _plan_layout(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
+                     limits: AxisLimits, layout: Layout, rounds: int) -> tuple[Phases, dict]:
+        """Segments, S-curves, verification and repair from a start within the limits."""
+        shares = layout.shares
+        starts = choose_segments(grid, vlim, layout.band_ratio)
+        if layout.max_segments is not None and starts.size - 1 > layout.max_segments:
+            raise PlanningError(f"heuristic: layout of {starts.size - 1} segments skipped")
+        factor = np.ones(starts.size - 1)
+        info: dict = {"rounds": 0, "verified": False, "zero_junction_rounds": 0}
+        phases = None
+        for round_ in range(rounds):
+            phases, starts, factor, free = self._profile_phases(
+                request, grid, starts, factor, vlim, limits, shares, layout.zero_fallback,
+                layout.free_junctions)
+            info["zero_junction_rounds"] += int(not free)
+            profile = build_profile(phases)
+            failing = failing_segments(profile, grid, starts, request.limits)
+            if not failing.any() and self.sampled_verify:
+                failing = sampled_failing_segments(request.path, profile, grid, starts,
+                                                   request.limits, request.dt)
+                info["sampled_repairs"] = info.get("sampled_repairs", 0) + int(failing.any())
+            info["rounds"] = round_ + 1
+            if not failing.any():
+                info["verified"] = True
+                break
+            factor = np.where(failing, factor * REPAIR_STEP, factor)
+        info["segments"] = int(starts.size - 1)
+        info["cells"] = grid.ncells
+        if not info["verified"]:
+            raise PlanningError(f"heuristic: no profile within the limits after "
+                                f"{info['rounds']} repair rounds")
+        return phases, info
+
+    def _profile_phases(self, request: PlanRequest, grid: PathGrid, starts: np.ndarray,
+                        factor: np.ndarray, vlim: np.ndarray, limits: AxisLimits,
+                        shares: BudgetShares, zero_fallback: bool = True,
+                        free: bool = True
+                        ) -> tuple[Phases, np.ndarray, np.ndarray, bool]:
+        """The phases of one round: the free-junction chain, else zero junctions. If the
+        start state cannot reach a valid end state within the first segment, its cruise
+        cap is first lowered to the start feed (which raises its acceleration and jerk
+        budgets), then leading segments are merged."""
+        lowered = False
+        v_cap = None
+        tries = 0
+        while True:
+            b = segment_budgets(grid, starts, vlim, limits, shares, factor, v_cap)
+            if self.free_junctions and free and tries < FREE_TRIES:
+                tries += 1
+                parts = self._free_parts(request, grid, starts, b)
+                if parts is not None:
+                    return concat_phases(parts), starts, factor, True
+                if not zero_fallback:
+                    raise PlanningError("heuristic: no free-junction chain for this layout")
+            try:
+                parts = zero_junction_parts(self._solver, request, grid, starts, b,
+                                            self.margin)
+                return concat_phases(parts), starts, factor, False
+            except SegmentInfeasibleError:
+                v_cap = np.full(starts.size - 1, np.inf)
+                if not lowered and request.start.v > 0:
+                    lowered = True
+                    v_cap[0] = request.start.v
+                elif starts.size <= 2:
+                    raise PlanningError("the start state cannot stop within the window "
+                                        f"[{request.start.s}, {request.s_end}]") from None
+                else:
+                    lowered = False
+                    starts = np.delete(starts, 1)
+                    factor = np.delete(factor, 1)
+                    v_cap = v_cap[1:]
+
+    def _free_parts(self, request: PlanRequest, grid: PathGrid, starts: np.ndarray,
+                    b) -> list[Phases] | None:
+        st = request.start
+        cap = junction_caps(request, grid, starts, b)
+        # the chain's fallback feeds keep 1e-6 of each segment spare: at the exact
+        # compatibility limit Ruckig's rounding refuses the zero-acceleration S-curve
+        slack = 1.0 - 1e-6
+        w = junction_feeds(request, grid, starts, b, slack=slack)
+        if st.a == 0.0:  # and from a start at rest or cruising, reachable from there
+            w[1] = min(w[1], reachable_feed(st.v, float(b.L[0]) * slack, float(b.A[0]),
+                                            float(b.J[0])))
+            forward_pass(w, b, slack)
+        V0, A0 = first_caps(st.v, st.a, float(b.V[0]), float(b.A[0]), self.margin)
+        b = replace(b, V=np.concatenate([[max(V0, b.V[0])], b.V[1:]]))
+        cap[0] = st.v
+        got = chain(self._solver, b, cap, w, (st.v, st.a), float(cap[-1]), A0,
+                    neighbour_min(b.J), neighbour_min(b.A))
+        return None if got is None else got[0]
+
+    def _result(self, profile: FeedProfile, t_start: float, info: dict) -> PlanResult:
+        return PlanResult(profile, self.name, time.perf_counter() - t_start, info)
+
+
+def _rest_profile(s: float, dt: float) -> FeedProfile:
+    """A profile that stays at s for one sample time."""
+    from scipy.interpolate import PPoly
+
+    return FeedProfile(PPoly(np.array([[0.0], [0.0], [0.0], [s]]), np.array([0.0, dt])))
+
+
+def plan_rest_to_rest(path, limits, dt: float = 0.001, **kwargs) -> PlanResult:
+    """Convenience: the whole path from rest to rest with the heuristic planner."""
+    request = PlanRequest(path, limits, PathState(0.0), path.length, dt=dt)
+    return HeuristicPlanner(**kwargs).plan(request)
+
+
+__all__ = ["HeuristicPlanner", "plan_rest_to_rest"]
