@@ -23,7 +23,7 @@ G1 X999
 
 
 def test_gcode_moves_g92_units_and_feed() -> None:
-    r = read_gcode(PROGRAM)
+    r = read_gcode(PROGRAM, dialect="rs274")
     assert r.axes == ["X", "C"]
     assert r.points.tolist() == [
         [10.0, 90.0],
@@ -35,10 +35,17 @@ def test_gcode_moves_g92_units_and_feed() -> None:
     ]
     assert r.skipped == 2
     assert r.lines.tolist() == [4, 8, 9, 10, 11, 12]
-    assert np.allclose(r.feed[:3], 10.0)  # F600 mm/min
+    # rs274: F600 mm/min measures X when X moves: X10 A90 takes 1 s, so the path speed
+    # (path_scale 1: the norm of X mm and A deg) may reach hypot(10, 90) per s
+    assert r.feed[0] == pytest.approx(np.hypot(10.0, 90.0))
+    assert np.allclose(r.feed[1:3], 10.0)  # X alone; A alone (F in deg/min)
     assert r.feed[3] == pytest.approx(60 * 25.4 / 60)  # F60 inch/min
+    assert r.programmed_time_s == pytest.approx(1.0 + 0.5 + 1.0 + 1.0)
     assert np.isnan(r.feed[4])  # rapid: no cap
     assert np.isnan(r.feed[5])  # G0 is modal
+    marlin = read_gcode(PROGRAM)  # the default dialect: G0 takes the modal F like G1
+    assert np.array_equal(marlin.points, r.points)
+    assert marlin.feed[4] == marlin.feed[5] == pytest.approx(25.4)
 
 
 def test_gcode_third_axis_and_thousands_of_moves() -> None:
@@ -53,7 +60,8 @@ def test_gcode_third_axis_and_thousands_of_moves() -> None:
     [
         ("G1 X1\nG1 X2 Q5\n", "line 2: unsupported word Q5"),
         ("G1 X1\n\nG2 X2 A1\n", "line 3: unsupported word G2"),
-        ("G1 X1 Z3\n", "line 1: unsupported word Z3"),
+        ("G1 X1 Z3\n", "line 1: letter Z .Z3.: this machine has no axis for it; map it in the "
+                        "configuration .gcode.letters"),
         ("X1\n", "line 1: axis words before any G0/G1"),
         ("G1 X1 (open comment\n", "line 1: unbalanced"),
         ("G1 X1\nG1 X1.2.3\n", "line 2: cannot read"),

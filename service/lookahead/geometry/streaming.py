@@ -66,7 +66,103 @@ class _Buffer:
         return self._data[tuple(index)]
 
 
-class StreamingFit:
+class PointStream:
+    """The input side of a streaming fit: a point stream (axis units) received in chunks,
+    repeats skipped, parameterized by cumulative chord length u (bit-identical whatever
+    the chunking). Subclasses build the geometry in `_finalize` (called after each chunk)."""
+
+    def __init__(self, naxes: int, path_scale: np.ndarray, min_step: float = MIN_STEP) -> None:
+        self.naxes = int(naxes)
+        self.path_scale = np.asarray(path_scale, dtype=float).reshape(-1)
+        if self.path_scale.size != self.naxes:
+            raise ValueError(f"path_scale: expected {self.naxes} entries")
+        self.min_step = float(min_step)
+        self.skipped = 0
+        self.received = 0
+        self._finished = False
+        self._u = _Buffer(())
+        self._pts = _Buffer((self.naxes,))
+        self._path: Path | None = None
+
+    # --- input ------------------------------------------------------------------------
+    @property
+    def npoints(self) -> int:
+        """Number of kept (distinct) points."""
+        return self._u.size
+
+    def extend(self, points: np.ndarray) -> None:
+        """Append a chunk (n, naxes) of points; the chunk does not repeat the last point."""
+        if self._take(points) is not None:
+            self._finalize()
+
+    def points(self) -> np.ndarray:
+        """The kept points (npoints, naxes), axis units (a read-only view)."""
+        view = self._pts.view()
+        view.flags.writeable = False
+        return view
+
+    def _take(self, points: np.ndarray) -> np.ndarray | None:
+        """Validate and append a chunk (the geometry is not updated: `_finalize`); the
+        indices of its kept rows (None if none)."""
+        if self._finished:
+            raise ValueError("points: the stream is finished")
+        arr = validate_points(points, self.naxes, what=f"points (stream from {self.received})")
+        self.received += len(arr)
+        kept, steps, rows = self._drop_repeats(arr)
+        if kept.size == 0:
+            return None
+        # np.cumsum is sequential: u is bit-identical whatever the chunking
+        if self._u.size:
+            u_new = np.cumsum(np.concatenate([[self._u.view()[-1]], steps]))[1:]
+        else:  # the stream's first point is at u = 0 (its step is inf)
+            u_new = np.cumsum(np.concatenate([[0.0], steps[1:]]))
+        self._u.append(u_new)
+        self._pts.append(kept)
+        self._path = None
+        return rows
+
+    def _finalize(self) -> None:
+        raise NotImplementedError
+
+    def _drop_repeats(self, arr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Kept rows of `arr`, their metric steps from the previous kept point and their
+        row indices in `arr`."""
+        prev = self._pts.view()[-1] if self._pts.size else None
+        chain = arr if prev is None else np.vstack([prev, arr])
+        steps = self._metric_steps(np.diff(chain, axis=0))
+        if prev is None:
+            steps = np.concatenate([[np.inf], steps])
+        if np.all(steps > self.min_step):
+            return arr, steps, np.arange(len(arr))
+        # rare path: a sequential pass so a run of tiny moves is measured from the last
+        # kept point, not from its (skipped) predecessor
+        keep_rows, keep_steps, keep_idx = [], [], []
+        last = prev
+        for i, row in enumerate(arr):
+            step = np.inf if last is None else float(self._metric_steps(row - last))
+            if step <= self.min_step:
+                self.skipped += 1
+                continue
+            keep_rows.append(row)
+            keep_steps.append(step)
+            keep_idx.append(i)
+            last = row
+        if not keep_rows:
+            return np.empty((0, self.naxes)), np.empty(0), np.empty(0, dtype=int)
+        return np.array(keep_rows), np.array(keep_steps), np.array(keep_idx)
+
+    def _metric_steps(self, deltas: np.ndarray) -> np.ndarray:
+        """Metric lengths of point differences (last axis: the axes). One formula for both
+        passes of `_drop_repeats`: np.linalg.norm rounds differently, and a skipped repeat
+        must leave the same u as a stream without it."""
+        return np.sqrt(np.sum((deltas * self.path_scale) ** 2, axis=-1))
+
+    @property
+    def finished(self) -> bool:
+        return self._finished
+
+
+class StreamingFit(PointStream):
     """Fit of a point stream (axis units) received in chunks; see the module docstring."""
 
     def __init__(
@@ -78,17 +174,8 @@ class StreamingFit:
     ) -> None:
         if method not in FIT_METHODS:
             raise ValueError(f"fit: unknown method {method!r}, expected one of {FIT_METHODS}")
-        self.naxes = int(naxes)
-        self.path_scale = np.asarray(path_scale, dtype=float).reshape(-1)
-        if self.path_scale.size != self.naxes:
-            raise ValueError(f"path_scale: expected {self.naxes} entries")
+        super().__init__(naxes, path_scale, min_step)
         self.method = method
-        self.min_step = float(min_step)
-        self.skipped = 0
-        self.received = 0
-        self._finished = False
-        self._u = _Buffer(())
-        self._pts = _Buffer((self.naxes,))
         self._ctrl = _Buffer((self.naxes,))  # final B-spline control points (cubic)
         self._coef = _Buffer((4, self.naxes), axis=1)  # final pieces, PPoly layout
         # arc-length quadrature leaves of the final pieces (`arclength.Leaves`)
@@ -96,63 +183,6 @@ class StreamingFit:
         self._leaf_length = _Buffer(())
         self._leaf_count = _Buffer((), dtype=int)
         self._s_final = 0.0
-        self._path: Path | None = None
-
-    # --- input ------------------------------------------------------------------------
-    @property
-    def npoints(self) -> int:
-        """Number of kept (distinct) points."""
-        return self._u.size
-
-    def extend(self, points: np.ndarray) -> None:
-        """Append a chunk (n, naxes) of points; the chunk does not repeat the last point."""
-        if self._finished:
-            raise ValueError("points: the stream is finished")
-        arr = validate_points(points, self.naxes, what=f"points (stream from {self.received})")
-        self.received += len(arr)
-        kept, steps = self._drop_repeats(arr)
-        if kept.size == 0:
-            return
-        # np.cumsum is sequential: u is bit-identical whatever the chunking
-        if self._u.size:
-            u_new = np.cumsum(np.concatenate([[self._u.view()[-1]], steps]))[1:]
-        else:  # the stream's first point is at u = 0 (its step is inf)
-            u_new = np.cumsum(np.concatenate([[0.0], steps[1:]]))
-        self._u.append(u_new)
-        self._pts.append(kept)
-        self._path = None
-        self._finalize()
-
-    def _drop_repeats(self, arr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Kept rows of `arr` and their metric steps from the previous kept point."""
-        prev = self._pts.view()[-1] if self._pts.size else None
-        chain = arr if prev is None else np.vstack([prev, arr])
-        steps = self._metric_steps(np.diff(chain, axis=0))
-        if prev is None:
-            steps = np.concatenate([[np.inf], steps])
-        if np.all(steps > self.min_step):
-            return arr, steps
-        # rare path: a sequential pass so a run of tiny moves is measured from the last
-        # kept point, not from its (skipped) predecessor
-        keep_rows, keep_steps = [], []
-        last = prev
-        for row in arr:
-            step = np.inf if last is None else float(self._metric_steps(row - last))
-            if step <= self.min_step:
-                self.skipped += 1
-                continue
-            keep_rows.append(row)
-            keep_steps.append(step)
-            last = row
-        if not keep_rows:
-            return np.empty((0, self.naxes)), np.empty(0)
-        return np.array(keep_rows), np.array(keep_steps)
-
-    def _metric_steps(self, deltas: np.ndarray) -> np.ndarray:
-        """Metric lengths of point differences (last axis: the axes). One formula for both
-        passes of `_drop_repeats`: np.linalg.norm rounds differently, and a skipped repeat
-        must leave the same u as a stream without it."""
-        return np.sqrt(np.sum((deltas * self.path_scale) ** 2, axis=-1))
 
     # --- finalization -----------------------------------------------------------------
     def _knots(self, lo: int, hi: int) -> np.ndarray:
@@ -255,7 +285,3 @@ class StreamingFit:
                 self._s_final = path.length
             self._finished = True
         return path
-
-    @property
-    def finished(self) -> bool:
-        return self._finished
