@@ -113,8 +113,11 @@ def test_duplicates_wrong_axes_and_late_segments_are_rejected():
     eng = Engine(cfg, make_planner("heuristic"))
     segs = _segments("d", _points(), 100)
     eng.submit(segs[0])
-    events = eng.submit(segs[0])
-    assert [e.type for e in events] == ["rejected"] and "duplicate" in events[0].extra["reason"]
+    assert eng.submit(segs[0]) == []  # the same again (at-least-once delivery): ignored
+    changed = Segment("d", 0, AXES, "points", False, points=segs[0].points + 1.0)
+    events = eng.submit(changed)  # the same seq with other points: rejected, first kept
+    assert [e.type for e in events] == ["rejected"]
+    assert "different content" in events[0].extra["reason"]
     bad_axes = Segment("d", 1, ("X", "Y"), "points", False, points=np.ones((2, 2)))
     assert eng.submit(bad_axes)[0].extra["reason"].startswith("axes")
     for seg in reversed(segs[1:]):  # out of order: they wait, then go in order

@@ -40,6 +40,17 @@ def open_session(section: ZenohSection):
     return zenoh.open(zenoh_config(section))
 
 
+def reliable_publisher(session, key_expr: str):
+    """A publisher that does not lose messages (PROTOCOL.md "Delivery"): reliable, and
+    blocking instead of dropping when the transmission queue is full (zenoh's default
+    congestion control drops under load, even on loopback)."""
+    import zenoh
+
+    return session.declare_publisher(key_expr,
+                                     congestion_control=zenoh.CongestionControl.BLOCK,
+                                     reliability=zenoh.Reliability.RELIABLE)
+
+
 def client_section(section: ZenohSection) -> ZenohSection:
     """The session a client opens against a service configured with `section`.
 

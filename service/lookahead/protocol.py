@@ -26,11 +26,15 @@ MAX_AXES = 16
 
 JOB_ID_RE = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 SEGMENT_KINDS = ("points", "bspline", "nurbs")
-FITS = ("cubic", "pchip")
+FITS = ("cubic", "pchip", "linear", "smooth")
 STATES = ("idle", "running", "holding", "starved", "fault")
-EVENT_TYPES = ("job_started", "job_finished", "rejected", "starved", "fault")
+EVENT_TYPES = ("job_started", "job_finished", "rejected", "starved", "fault", "missing",
+               "warning")
 COMMANDS = ("hold", "resume", "abort", "override", "reset")
 OVERRIDE_MAX = 1.5
+#: smallest override taken: the planner plans to jmax * f^3, which for f much below this
+#: underflows its checks (found by tests/test_service_fuzz.py: f = 1e-300 faulted a job)
+OVERRIDE_MIN = 1e-3
 
 
 class ProtocolError(ValueError):
@@ -185,6 +189,8 @@ class Segment:
 
     kind 'points': `points` (n, naxes) and `fit`; kind 'bspline'/'nurbs': `degree`, `knots`,
     `ctrl` (m, naxes) and, for nurbs, `weights` (m,). `feed` caps the path speed (path units/s).
+    `tolerance` (path units, >= 0; None: the machine's default): how far fits `linear` and
+    `smooth` may leave the points' polyline at this segment's points (0: exact stops).
     """
 
     job: str
@@ -199,6 +205,7 @@ class Segment:
     ctrl: np.ndarray | None = None
     weights: np.ndarray | None = None
     feed: float | None = None
+    tolerance: float | None = None
 
     def to_map(self) -> dict[str, Any]:
         out: dict[str, Any] = {"v": VERSION, "job": self.job, "seq": self.seq,
@@ -217,6 +224,8 @@ class Segment:
                 out["weights"] = np.asarray(self.weights, dtype=float).tolist()
         if self.feed is not None:
             out["feed"] = self.feed
+        if self.tolerance is not None:
+            out["tolerance"] = self.tolerance
         return out
 
     def encode(self) -> bytes:
@@ -252,13 +261,18 @@ def validate_segment(msg: dict[str, Any], axes: tuple[str, ...] | list[str] | No
     feed = None
     if msg.get("feed") is not None:
         feed = _float(msg["feed"], "feed", positive=True)
+    tolerance = None
+    if msg.get("tolerance") is not None:
+        tolerance = _float(msg["tolerance"], "tolerance")
+        if tolerance < 0:
+            raise ProtocolError("tolerance", f"must be >= 0, got {tolerance}")
     if kind == "points":
         points = _matrix(_require(msg, "points"), "points", naxes, MAX_SEGMENT_POINTS)
         fit = _str(msg.get("fit", "cubic"), "fit")
         if fit not in FITS:
             raise ProtocolError("fit", f"must be one of {', '.join(FITS)}, got {fit!r}")
         return Segment(job, seq, seg_axes, kind, last, points=_frozen(points), fit=fit,
-                       feed=feed)
+                       feed=feed, tolerance=tolerance)
     degree = _int(_require(msg, "degree"), "degree", lo=1, hi=5)
     ctrl = _matrix(_require(msg, "ctrl"), "ctrl", naxes, MAX_SEGMENT_POINTS)
     m = ctrl.shape[0]
@@ -285,7 +299,7 @@ def validate_segment(msg: dict[str, Any], axes: tuple[str, ...] | list[str] | No
             raise ProtocolError(f"weights[{bad[0]}]", f"must be > 0, got {weights[bad[0]]}")
         weights = _frozen(weights)
     return Segment(job, seq, seg_axes, kind, last, degree=degree, knots=_frozen(knots),
-                   ctrl=_frozen(ctrl), weights=weights, feed=feed)
+                   ctrl=_frozen(ctrl), weights=weights, feed=feed, tolerance=tolerance)
 
 
 # --- setpoints -----------------------------------------------------------------------------
@@ -401,12 +415,24 @@ class Status:
     planner: str
     plan_ms: float
     error: str | None = None
+    #: flow control (PROTOCOL.md "Delivery"): the job being received, its lowest seq not
+    #: yet received (last + 1 once its `last` segment is in), points and control points
+    #: received but not executed, false while the service's buffer is full
+    receiving: str | None = None
+    next_seq: int | None = None
+    buffered_points: int = 0
+    accepting: bool = True
+    #: window plans the configured planner could not make (the stop planner made them)
+    fallbacks: int = 0
 
     def encode(self) -> bytes:
         return _pack({"v": VERSION, "state": self.state, "job": self.job, "k": self.k,
                       "queued": self.queued, "horizon_s": self.horizon_s,
                       "override": self.override, "planner": self.planner,
-                      "plan_ms": self.plan_ms, "error": self.error})
+                      "plan_ms": self.plan_ms, "error": self.error,
+                      "receiving": self.receiving, "next_seq": self.next_seq,
+                      "buffered_points": self.buffered_points, "accepting": self.accepting,
+                      "fallbacks": self.fallbacks})
 
     @staticmethod
     def decode(payload: bytes) -> Status:
@@ -418,12 +444,21 @@ class Status:
         job = None if job is None else _job(job)
         error = _require(msg, "error")
         error = None if error is None else _str(error, "error")
+        # flow-control fields: absent in older recordings, so read with defaults
+        receiving = msg.get("receiving")
+        receiving = None if receiving is None else _job(receiving, "receiving")
+        next_seq = msg.get("next_seq")
+        next_seq = None if next_seq is None else _int(next_seq, "next_seq", lo=0)
         return Status(state, job, _int(_require(msg, "k"), "k"),
                       _int(_require(msg, "queued"), "queued", lo=0),
                       _float(_require(msg, "horizon_s"), "horizon_s"),
                       _float(_require(msg, "override"), "override"),
                       _str(_require(msg, "planner"), "planner"),
-                      _float(_require(msg, "plan_ms"), "plan_ms"), error)
+                      _float(_require(msg, "plan_ms"), "plan_ms"), error,
+                      receiving, next_seq,
+                      _int(msg.get("buffered_points", 0), "buffered_points", lo=0),
+                      _bool(msg.get("accepting", True), "accepting"),
+                      _int(msg.get("fallbacks", 0), "fallbacks", lo=0))
 
 
 @dataclass(frozen=True)
@@ -453,7 +488,9 @@ class Event:
         extra = {key: val for key, val in msg.items() if key not in ("v", "type", "job", "k")}
         if etype == "rejected":
             _str(_require(msg, "reason"), "reason")
-        if etype == "fault":
+        if etype == "missing":
+            _int(_require(msg, "seq"), "seq", lo=0)
+        if etype in ("fault", "warning"):
             _str(_require(msg, "reason"), "reason")
         if etype == "job_finished":
             _float(_require(msg, "duration_s"), "duration_s")
@@ -499,8 +536,9 @@ class Command:
         if verb != "override":
             return Command(verb)
         value = _float(_require(msg, "value"), "value")
-        if not 0 < value <= OVERRIDE_MAX:
-            raise ProtocolError("value", f"override must be in (0, {OVERRIDE_MAX}], got {value}")
+        if not OVERRIDE_MIN <= value <= OVERRIDE_MAX:
+            raise ProtocolError("value", f"override must be in [{OVERRIDE_MIN}, {OVERRIDE_MAX}] "
+                                f"(0 < f, and the planner needs f^3 > 0), got {value}")
         return Command(verb, value)
 
 

@@ -27,7 +27,7 @@ from typing import Any
 
 import msgpack
 
-from lookahead.bus import open_session, poll_fifo
+from lookahead.bus import open_session, poll_fifo, reliable_publisher
 from lookahead.config import Config
 from lookahead.planning.base import Planner
 from lookahead.protocol import (
@@ -50,8 +50,18 @@ log = logging.getLogger("lookahead.service")
 
 #: segments buffered by zenoh before the drain thread takes them
 FIFO_CAPACITY = 4096
+#: undecoded segment payloads the drain thread hands to the main loop at most (count,
+#: bytes); beyond, it waits, the FifoChannel fills and zenoh holds the publisher back
+#: (blocking congestion control). 1024 x 200-point segments are ~3.7 MB.
+INCOMING_MAX = 1024
+INCOMING_MAX_BYTES = 32 * 1024 * 1024
 #: longest sleep of the main loop (s)
 MAX_SLEEP_S = 0.01
+#: longest the main loop spends taking in segments at a time (s): a burst of thousands
+#: must not hold up batches, status or commands (real-time mode produces MIN_AHEAD_S plus
+#: 1.5 x the slowest replan ahead, >= 50 ms); longer passes take a resend and the segments
+#: behind it in one go (recovery, bench/delivery_bench.py)
+TAKE_IN_MAX_S = 0.05
 #: fast mode: batches published between two looks at commands and status
 FAST_BURST = 50
 #: real-time mode: produce at least this far ahead of publication, plus 1.5 x the longest
@@ -85,6 +95,14 @@ class ServiceStats:
     max_late_s: float = 0.0
     first_segment_s: float | None = None
     first_batch_s: float | None = None
+    #: delivery: segments turned away while the buffer was full, `missing` events, and the
+    #: most the engine buffered (points, bytes) and the drain queue held (payloads, bytes)
+    refused_full: int = 0
+    missing: int = 0
+    max_buffered_points: int = 0
+    max_buffered_bytes: int = 0
+    max_incoming: int = 0
+    max_incoming_bytes: int = 0
 
 
 class PlannerService:
@@ -100,6 +118,9 @@ class PlannerService:
         self.pacer = Pacer(config.machine.dt, config.service.lead_s)
         self.stats = ServiceStats()
         self._incoming: queue.Queue[bytes] = queue.Queue()
+        self._incoming_bytes = 0  # bytes of the payloads in _incoming
+        self._incoming_cv = threading.Condition()
+        self._filled_gap = False  # the payloads taken in since the last pass filled a gap
         self._commands: queue.Queue[_PendingCommand] = queue.Queue()
         self._shutdown = threading.Event()
         self._drain_stop = threading.Event()
@@ -120,11 +141,8 @@ class PlannerService:
         import zenoh
 
         self._session = session = open_session(self.config.zenoh)
-        block = zenoh.CongestionControl.BLOCK
-        self._pub_setpoints = session.declare_publisher(key(self.ns, "setpoints"),
-                                                        congestion_control=block)
-        self._pub_events = session.declare_publisher(key(self.ns, "events"),
-                                                     congestion_control=block)
+        self._pub_setpoints = reliable_publisher(session, key(self.ns, "setpoints"))
+        self._pub_events = reliable_publisher(session, key(self.ns, "events"))
         self._pub_status = session.declare_publisher(key(self.ns, "status"))
         self._sub = session.declare_subscriber(key(self.ns, "segments"),
                                                zenoh.handlers.FifoChannel(FIFO_CAPACITY))
@@ -161,9 +179,26 @@ class PlannerService:
         self._session = None
 
     def _drain(self) -> None:
-        """FifoChannel -> queue of payloads, until close()."""
-        poll_fifo(self._sub, lambda sample: self._incoming.put(sample.payload.to_bytes()),
+        """FifoChannel -> queue of payloads (at most INCOMING_MAX / _BYTES), until close()."""
+        poll_fifo(self._sub, lambda sample: self._enqueue(sample.payload.to_bytes()),
                   self._drain_stop)
+
+    def _enqueue(self, payload: bytes) -> None:
+        with self._incoming_cv:
+            while ((self._incoming.qsize() >= INCOMING_MAX
+                    or self._incoming_bytes + len(payload) > INCOMING_MAX_BYTES)
+                   and self._incoming.qsize() and not self._drain_stop.is_set()):
+                self._incoming_cv.wait(0.05)
+            self._incoming.put(payload)
+            self._incoming_bytes += len(payload)
+            self.stats.max_incoming = max(self.stats.max_incoming, self._incoming.qsize())
+            self.stats.max_incoming_bytes = max(self.stats.max_incoming_bytes,
+                                                self._incoming_bytes)
+
+    def _dequeued(self, payload: bytes) -> None:
+        with self._incoming_cv:
+            self._incoming_bytes -= len(payload)
+            self._incoming_cv.notify_all()
 
     def _on_status(self, query: Any) -> None:
         query.reply(query.key_expr, self._status_payload)
@@ -210,6 +245,7 @@ class PlannerService:
                     log.error("shutdown: the stop did not finish in %s s", SHUTDOWN_TIMEOUT_S)
                     break
             self.engine.expire_gaps(now)
+            self._announce_missing(now)
             produced = self._produce_fast() if self.fast else self._produce_paced(now)
             self._publish_events()
             if now >= next_status:
@@ -236,8 +272,9 @@ class PlannerService:
             payload = self._incoming.get(timeout=timeout)
         except queue.Empty:
             return
+        self._dequeued(payload)
         self._handle_payload(payload, time.monotonic())
-        self._status_payload = self._status().encode()
+        self._after_take_in(time.monotonic())
 
     def _stopping_done(self) -> bool:
         return self._shutdown.is_set() and self.engine.active_job is None
@@ -317,15 +354,39 @@ class PlannerService:
     # --- input ------------------------------------------------------------------------
     def _take_in(self, now: float) -> None:
         taken = False
-        while True:
+        until = time.monotonic() + TAKE_IN_MAX_S
+        while time.monotonic() < until:
             try:
                 payload = self._incoming.get_nowait()
             except queue.Empty:
                 break
+            self._dequeued(payload)
             self._handle_payload(payload, now)
             taken = True
-        if taken:  # `queued` changed
-            self._status_payload = self._status().encode()
+        if taken:
+            if self._filled_gap:
+                # a pass that took a resend in also took the segments waiting behind it: it
+                # held up production like a replan, so it counts toward the real-time
+                # buffer's lead (other passes do not: a job's first burst would lengthen
+                # every hold's latency)
+                self._filled_gap = False
+                self._max_compute_s = max(self._max_compute_s,
+                                          min(time.monotonic() - until + TAKE_IN_MAX_S,
+                                              MAX_AHEAD_S))
+            self._after_take_in(now)
+
+    def _after_take_in(self, now: float) -> None:
+        """Segments came in: announce new gaps at once, refresh the status answer
+        (`queued`, `next_seq`, `buffered_points` changed)."""
+        self._status_payload = self._status().encode()  # also recounts the buffer
+        points, nbytes = self.engine.buffered
+        self.stats.max_buffered_points = max(self.stats.max_buffered_points, points)
+        self.stats.max_buffered_bytes = max(self.stats.max_buffered_bytes, nbytes)
+        self._announce_missing(now)
+
+    def _announce_missing(self, now: float) -> None:
+        if self.engine.announce_missing(now):
+            self._publish_events()
 
     def _handle_payload(self, payload: bytes, now: float) -> None:
         if self.stats.first_segment_s is None:
@@ -337,6 +398,21 @@ class PlannerService:
             self.engine.reject(str(exc), job, seq)
             return
         self.stats.segments += 1
+        admission = self.engine.admission(seg)
+        self._filled_gap = self._filled_gap or admission == "gap"
+        if self.engine.full and admission == "new":
+            # full: only a segment that fills a gap is taken (waiting ones sit behind it);
+            # this one is turned away, and the publisher sends it again (PROTOCOL.md
+            # "Delivery", docs/protocol.md "Delivery and flow control")
+            points, nbytes = self.engine.buffered
+            svc = self.config.service
+            self.stats.refused_full += 1
+            self.engine.reject(f"buffer: full ({points} points, {nbytes} bytes received but "
+                               f"not executed; caps {svc.max_buffered_points} points, "
+                               f"{svc.max_buffered_bytes} bytes): send seq {seg.seq} again "
+                               "when the status shows accepting", seg.job, seg.seq,
+                               retry=True)
+            return
         try:
             self.engine.submit(seg, now)
         except Exception as exc:  # a bug must not take the service down
@@ -383,6 +459,8 @@ class PlannerService:
         for event in events:
             if event.type == "rejected":
                 self.stats.rejected += 1
+            elif event.type == "missing":
+                self.stats.missing += 1
             self._pub_events.put(event.encode())
             level = logging.WARNING if event.type in ("rejected", "fault", "starved") \
                 else logging.INFO

@@ -1,28 +1,58 @@
 """Per-job assembly of toolpath segments (PROTOCOL.md "Segment") into geometry.
 
-`SegmentOrder` puts one job's segments in `seq` order: an out-of-order segment waits
-(bounded count and time), a duplicate is rejected. `JobGeometry` turns the ordered segments
-into a `Path`: point streams through `StreamingFit` (final geometry grows as points arrive),
-B-spline / NURBS pieces through `CompositePath` (each piece is final when it arrives).
+`SegmentOrder` puts one job's segments in `seq` order and does the receiving side of
+PROTOCOL.md "Delivery": an out-of-order segment waits (times in seconds on the caller's
+clock), the seqs it waits for are announced as `missing`, a resend with the same content
+(hash of the decoded fields) is ignored, one with different content is rejected.
+`JobGeometry` turns the ordered segments into a `Path`: point streams through
+`StreamingFit` (final geometry grows as points arrive), B-spline / NURBS pieces through
+`CompositePath` (each piece is final when it arrives).
 Arc lengths s are in the path metric (path units, mm for the winder).
 """
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from lookahead.geometry.base import Path
+from lookahead.geometry.deviation import interval_excursions
+from lookahead.geometry.fits import (
+    TOLERANCE_FITS,
+    AnyStreamingFit,
+    extend_fit,
+    make_streaming_fit,
+)
 from lookahead.geometry.nurbs import BSplinePath, CompositePath
-from lookahead.geometry.streaming import StreamingFit
+from lookahead.geometry.polyline import DEFAULT_TOLERANCE
 from lookahead.planning.base import FeedCap
 from lookahead.protocol import Segment
 
-#: at most this many out-of-order segments wait for a missing seq
-MAX_PENDING = 256
+#: a segment's seq may lie at most this far beyond the job's next expected seq (a publisher
+#: keeps a few hundred in flight; this stops a stray seq such as 2**64-1 from opening a gap
+#: that nothing will fill)
+SEQ_WINDOW = 65_536
+#: `missing` is announced again this often while a seq is waited for (s): PROTOCOL.md asks
+#: for at least every 0.5 s, and the service's loop may be busy ~0.1 s with a replan
+MISSING_REPEAT_S = 0.25
+#: at most this many missing seqs of one job are announced at a time (the lowest ones)
+MAX_ANNOUNCED = 64
+#: bytes counted per segment and per point on top of the segment's arrays (its objects and
+#: the fit's state): tracemalloc measured 3.7-14.9 kB per 2-point cubic segment and
+#: 0.95-2.2 kB per point of 200-point ones (cam-fp-hel25-D120-L300-noB, a sine; 2.2 kB with
+#: the fits of issue 15; tests/test_delivery_engine.py checks that the estimate bounds the
+#: measured memory). An overestimate only makes `accepting` turn false earlier.
+SEGMENT_OVERHEAD_BYTES = 16 * 1024
+POINT_OVERHEAD_BYTES = 3072
+#: largest |coordinate x path_scale| taken in (path units): 1e12 mm is far beyond any
+#: machine, and squares of it (arc lengths, spline solves) stay far from float overflow
+MAX_COORDINATE = 1e12
 #: a piece may start this far (relative to the axis range, at least 1 unit) from the last end
 JOIN_TOL = 1e-9
+#: at most this many fit-excursion warnings per job (one per segment at most)
+MAX_WARNINGS = 20
 #: a feed cap standing for "no cap" on segments without `feed` (path units / s)
 NO_CAP = 1e12
 
@@ -36,8 +66,37 @@ class SegmentRejectedError(ValueError):
         self.reason = reason
 
 
-class JobFaultError(RuntimeError):
-    """The job cannot continue (a seq gap that timed out, too many waiting segments)."""
+def segment_digest(seg: Segment) -> bytes:
+    """A hash of everything a segment says (not of its payload bytes: a resend may be
+    encoded differently, e.g. ints for floats, and is still the same segment)."""
+    h = hashlib.blake2b(digest_size=16)
+    h.update(repr((seg.job, seg.seq, seg.axes, seg.kind, seg.last, seg.fit, seg.degree,
+                   seg.feed, seg.tolerance)).encode())
+    for arr in (seg.points, seg.knots, seg.ctrl, seg.weights):
+        if arr is None:
+            h.update(b"-")
+        else:
+            a = np.ascontiguousarray(arr, dtype="<f8")
+            h.update(repr(a.shape).encode())
+            h.update(a.tobytes())
+    return h.digest()
+
+
+def segment_size(seg: Segment) -> tuple[int, int]:
+    """(points or control points, bytes) a segment takes in the service's buffer."""
+    arrays = [a for a in (seg.points, seg.knots, seg.ctrl, seg.weights) if a is not None]
+    n = len(seg.points) if seg.points is not None else len(seg.ctrl) if seg.ctrl is not None \
+        else 0
+    return n, (sum(int(a.nbytes) for a in arrays) + SEGMENT_OVERHEAD_BYTES
+               + n * POINT_OVERHEAD_BYTES)
+
+
+@dataclass
+class _Waiting:
+    seg: Segment
+    digest: bytes
+    t: float | None  # arrival time (s), None without a clock (replay)
+    size: tuple[int, int]
 
 
 @dataclass
@@ -46,47 +105,125 @@ class SegmentOrder:
 
     job: str
     gap_timeout_s: float
-    max_pending: int = MAX_PENDING
     expected: int = 0
     last_seq: int | None = None
-    pending: dict[int, tuple[Segment, float | None]] = field(default_factory=dict)
+    pending: dict[int, _Waiting] = field(default_factory=dict)
+    #: digests of the segments taken in, by seq (duplicates are recognised by them)
+    taken: dict[int, bytes] = field(default_factory=dict)
+    #: when each missing seq was last announced
+    announced: dict[int, float] = field(default_factory=dict)
+    pending_points: int = 0
+    pending_bytes: int = 0
+    _ready: dict[int, bytes] = field(default_factory=dict)
+
+    def admission(self, seg: Segment) -> str:
+        """What `offer` would do with `seg`, by seq alone: `duplicate` (a seq already
+        here), `gap` (it fills a gap that later waiting segments sit behind) or `new`."""
+        if seg.seq in self.taken or seg.seq in self.pending or seg.seq < self.expected:
+            return "duplicate"
+        if self.pending and self.expected <= seg.seq < max(self.pending):
+            return "gap"
+        return "new"
 
     def offer(self, seg: Segment, now_s: float | None) -> list[Segment]:
-        """Segments ready in order after `seg` arrived (possibly none)."""
+        """Segments ready in order after `seg` arrived (possibly none: it waits, or it is
+        an identical duplicate, which is ignored). SegmentRejectedError if it conflicts."""
+        digest = segment_digest(seg)
+        known = self.taken.get(seg.seq)
+        if known is None and seg.seq in self.pending:
+            known = self.pending[seg.seq].digest
+        if known is not None:
+            if known == digest:
+                return []
+            raise SegmentRejectedError(seg.seq, f"seq: {seg.seq} of job {self.job!r} was "
+                                       "already received with different content; the job "
+                                       "goes on with the first")
         if self.last_seq is not None and seg.seq > self.last_seq:
             raise SegmentRejectedError(seg.seq, f"seq: {seg.seq} comes after the job's last "
-                                  f"segment (seq {self.last_seq})")
-        if seg.seq < self.expected or seg.seq in self.pending:
-            raise SegmentRejectedError(seg.seq, f"seq: duplicate {seg.seq} of job {self.job!r}")
+                                       f"segment (seq {self.last_seq})")
+        if seg.seq < self.expected:  # only after close(): the job ended at a timed-out gap
+            raise SegmentRejectedError(seg.seq, f"seq: {seg.seq} of job {self.job!r} comes "
+                                       "after the job ended")
+        if seg.seq - self.expected >= SEQ_WINDOW:
+            raise SegmentRejectedError(seg.seq, f"seq: {seg.seq} is {seg.seq - self.expected} "
+                                       f"beyond the next expected seq {self.expected} of job "
+                                       f"{self.job!r} (at most {SEQ_WINDOW - 1})")
         if seg.seq > self.expected:
-            if len(self.pending) >= self.max_pending:
-                raise JobFaultError(f"seq: more than {self.max_pending} segments wait for the "
-                               f"missing seq {self.expected}")
-            self.pending[seg.seq] = (seg, now_s)
+            size = segment_size(seg)
+            self.pending[seg.seq] = _Waiting(seg, digest, now_s, size)
+            self.pending_points += size[0]
+            self.pending_bytes += size[1]
             return []
+        self._ready[seg.seq] = digest
         return [seg]
 
     def accepted(self, seg: Segment) -> list[Segment]:
         """Record that `seg` (the expected one) was taken in; the next waiting ones."""
+        self.taken[seg.seq] = self._ready.pop(seg.seq)
         self.expected = seg.seq + 1
         if seg.last:
             self.last_seq = seg.seq
-            dropped = [s for s in self.pending if s > seg.seq]
-            for s in dropped:
-                del self.pending[s]
-        nxt = self.pending.pop(self.expected, None)
-        return [] if nxt is None else [nxt[0]]
+            for s in [s for s in self.pending if s > seg.seq]:
+                self._unwait(s)
+        return self.release()
+
+    def refused(self, seg: Segment) -> None:
+        """`seg` (offered as ready) could not be taken in: its seq stays missing."""
+        self._ready.pop(seg.seq, None)
+
+    def release(self) -> list[Segment]:
+        nxt = self.pending.get(self.expected)
+        if nxt is None:
+            return []
+        self._unwait(self.expected)
+        self._ready[nxt.seg.seq] = nxt.digest
+        return [nxt.seg]
+
+    def _unwait(self, seq: int) -> None:
+        w = self.pending.pop(seq)
+        self.pending_points -= w.size[0]
+        self.pending_bytes -= w.size[1]
+
+    def holes(self, limit: int = MAX_ANNOUNCED) -> list[int]:
+        """The lowest missing seqs (at most `limit`) below the highest waiting one."""
+        if not self.pending:
+            return []
+        top = max(self.pending)
+        out, s = [], self.expected
+        while s < top and len(out) < limit:  # steps over waiting seqs or finds holes
+            if s not in self.pending:
+                out.append(s)
+            s += 1
+        return out
+
+    def announce(self, now_s: float) -> list[int]:
+        """Missing seqs to announce now: new holes, and holes announced MISSING_REPEAT_S
+        ago or earlier."""
+        holes = self.holes()
+        due = [h for h in holes if now_s - self.announced.get(h, -np.inf) >= MISSING_REPEAT_S]
+        keep = set(holes)
+        self.announced = {h: t for h, t in self.announced.items() if h in keep}
+        for h in due:
+            self.announced[h] = now_s
+        return due
 
     def overdue(self, now_s: float) -> bool:
-        """True if a waiting segment has waited longer than the gap timeout."""
-        times = [t for _, t in self.pending.values() if t is not None]
+        """True if a gap has been open (a later segment waiting) longer than the timeout."""
+        times = [w.t for w in self.pending.values() if w.t is not None]
         return bool(times) and now_s - min(times) > self.gap_timeout_s
 
     def close(self) -> None:
         """No more segments: the last one taken in (seq expected - 1) ends the job, and
         waiting segments are dropped (a seq gap that timed out)."""
         self.last_seq = self.expected - 1
-        self.pending.clear()
+        for s in list(self.pending):
+            self._unwait(s)
+        self.announced.clear()
+
+    @property
+    def complete(self) -> bool:
+        """True once the `last` segment and all before it are in."""
+        return self.last_seq is not None and self.expected > self.last_seq
 
     @property
     def waiting(self) -> int:
@@ -102,16 +239,25 @@ class JobGeometry:
     """
 
     def __init__(self, job: str, axes: tuple[str, ...], path_scale: np.ndarray,
-                 default_fit: str = "cubic") -> None:
+                 default_fit: str = "cubic", default_tolerance: float = DEFAULT_TOLERANCE
+                 ) -> None:
         self.job = job
         self.axes = axes
         self.path_scale = np.asarray(path_scale, dtype=float)
         self.default_fit = default_fit
+        #: tolerance (path units) of segments that give none (`linear`, `smooth`; the
+        #: excursion warnings of `cubic`, `pchip`)
+        self.default_tolerance = default_tolerance
+        #: warnings not yet drained (`drain_warnings`): fields of a `warning` event
+        self.warnings: list[dict] = []
+        self._warned = 0
+        self._checked = 0  # knot intervals of the current fit checked for excursions
+        self._checked_final: float | None = None  # its final_length at the last check
         self.kind: str | None = None
         self.finished = False
         self.nsegments = 0
         self.first_point: np.ndarray | None = None
-        self._fit: StreamingFit | None = None
+        self._fit: AnyStreamingFit | None = None
         self._fit_method = default_fit
         self._pieces: list[Path] = []  # curve pieces, or frozen point fits
         self._composite: Path | None = None
@@ -124,6 +270,8 @@ class JobGeometry:
         self._lo: np.ndarray | None = None
         self._hi: np.ndarray | None = None
         self._feeds: list[float | None] = []
+        # running (points, bytes) totals after each taken-in segment
+        self._cum_size: list[tuple[int, int]] = [(0, 0)]
 
     # --- input ----------------------------------------------------------------------
     def add(self, seg: Segment) -> None:
@@ -132,6 +280,7 @@ class JobGeometry:
             raise SegmentRejectedError(seg.seq, f"seq: job {self.job!r} already has its last "
                                   "segment")
         family = "points" if seg.kind == "points" else "curve"
+        self._check_magnitude(seg)
         if self.kind is not None and family != self.kind:
             raise SegmentRejectedError(seg.seq, f"kind: job {self.job!r} is made of {self.kind} "
                                   f"segments, got {seg.kind!r}")
@@ -142,8 +291,25 @@ class JobGeometry:
         self.kind = family
         self.nsegments += 1
         self._feeds.append(seg.feed)
+        n, b = segment_size(seg)
+        total = self._cum_size[-1]
+        self._cum_size.append((total[0] + n, total[1] + b))
         if seg.last:
             self.truncate()
+        if family == "points":
+            self._check_excursions(seg)
+
+    def _check_magnitude(self, seg: Segment) -> None:
+        """Reject coordinates so large that arc lengths and spline solves overflow."""
+        name = "points" if seg.kind == "points" else "ctrl"
+        arr = seg.points if seg.kind == "points" else seg.ctrl
+        if arr is None or not len(arr):
+            return
+        big = np.abs(np.asarray(arr, dtype=float) * self.path_scale) > MAX_COORDINATE
+        if big.any():
+            i, j = np.argwhere(big)[0]
+            raise SegmentRejectedError(seg.seq, f"{name}[{i}][{j}]: {arr[i, j]:.6g} is beyond "
+                                       f"{MAX_COORDINATE:.0e} path units")
 
     def truncate(self) -> None:
         """End the job at what has been received: the `last` segment, or a seq gap that
@@ -161,17 +327,58 @@ class JobGeometry:
             self.first_point = pts[0].copy()
         chain = pts if self._last_point is None else np.vstack([self._last_point, pts])
         fresh = self._fit is None
-        fit = self._fit or StreamingFit(len(self.axes), self.path_scale, self._fit_method)
+        fit = self._fit or make_streaming_fit(len(self.axes), self.path_scale,
+                                              self._fit_method, self.default_tolerance)
         try:  # a fit started after a freeze begins at the frozen end point
-            fit.extend(chain if fresh else pts)
+            extend_fit(fit, chain if fresh else pts, seg.tolerance)
         except ValueError as exc:
             raise SegmentRejectedError(seg.seq, str(exc)) from None
+        if fresh:
+            self._checked = 0
+            self._checked_final = None
         self._fit = fit
         self._cached = None
         steps = np.sqrt(np.sum((np.diff(chain, axis=0) * self.path_scale) ** 2, axis=1))
         self._chord += float(np.sum(steps))
         self._u_ends.append((len(self._pieces), self._chord))
         self._last_point = pts[-1].copy()
+
+    def _check_excursions(self, seg: Segment) -> None:
+        """`cubic` / `pchip`: a warning when the newly final pieces leave the points'
+        polyline by more than the tolerance (at most one per segment, MAX_WARNINGS a job)."""
+        fit = self._fit
+        if fit is None or fit.method in TOLERANCE_FITS or fit.npoints < 2:
+            return
+        if self._warned >= MAX_WARNINGS:
+            return
+        if not fit.finished and fit.final_length == self._checked_final:
+            return  # no new final pieces: skip building the live path (~3 ms a segment)
+        self._checked_final = fit.final_length
+        path = fit.path()
+        k1 = len(path.pp.x) - 1 if fit.finished else int(
+            np.searchsorted(path.breakpoints_s(), fit.final_length, side="right") - 1)
+        if k1 <= self._checked:
+            return
+        tol = self.default_tolerance if seg.tolerance is None else seg.tolerance
+        found = interval_excursions(path, fit.points(), self._checked, k1, tol)
+        self._checked = k1
+        if not found:
+            return
+        worst = max(found, key=lambda e: e.dev)
+        offset = float(sum(p.length for p in self._pieces))
+        self._warned += 1
+        self.warnings.append({
+            "seq": seg.seq, "s": offset + worst.s_max, "deviation": worst.dev,
+            "tolerance": tol,
+            "reason": f"fit: the {fit.method} fit leaves the points' polyline by up to "
+                      f"{worst.dev:.6g} path units (tolerance {tol:g}) at s = "
+                      f"{offset + worst.s_max:.6g} ({len(found)} stretch(es) up to segment "
+                      f"{seg.seq}); fit linear or smooth follows it"})
+
+    def drain_warnings(self) -> list[dict]:
+        """The warnings since the last call (fields of `warning` events)."""
+        out, self.warnings = self.warnings, []
+        return out
 
     def freeze(self) -> bool:
         """Make the points received so far final (the publisher stalled): the current fit
@@ -276,6 +483,16 @@ class JobGeometry:
                 s_in = f.s_of_u(np.minimum(u_end[mine], f.u_range[1]))
                 out[mine] = offsets[j] + np.minimum(s_in, f.length)
         return out
+
+    def unexecuted_size(self, s_now: float | None, tol: float = 0.0) -> tuple[int, int]:
+        """(points, bytes) of the taken-in segments that end beyond arc length `s_now`
+        (all of them for None: a job that has not started)."""
+        total = self._cum_size[-1]
+        if s_now is None or len(self._cum_size) == 1:
+            return total
+        done = int(np.searchsorted(self.segment_ends_s(), s_now + tol, side="right"))
+        executed = self._cum_size[done]
+        return total[0] - executed[0], total[1] - executed[1]
 
     def feed_cap(self, scale: float = 1.0) -> FeedCap | None:
         """Per-segment `feed` caps times `scale` over s (None if no segment has one)."""

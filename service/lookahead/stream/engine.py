@@ -13,8 +13,12 @@ API (stable; the replay client depends on it):
   they were taken in). `now_s` (any monotonic clock, seconds) only times seq gaps.
 - `expire_gaps(now_s) -> list[Event]`: fault jobs whose missing seq waited too long
   (see "Faults" below).
-- `reject(reason, job=None, seq=None) -> Event`: a `rejected` event for a payload that did
-  not decode (the service's decode errors).
+- `reject(reason, job=None, seq=None, **extra) -> Event`: a `rejected` event for a payload
+  that did not decode (the service's decode errors) or that the service turned away.
+- Delivery (PROTOCOL.md "Delivery"): `submit` ignores a resent segment with the same content
+  and rejects one with different content; `announce_missing(now_s)` emits `missing` for the
+  seqs that jobs wait for; `admission(segment)`, `buffered` and `full` let the service keep
+  its buffer within service.max_buffered_points / max_buffered_bytes before it submits.
 - `next_batch() -> SetpointBatch | None`: the next batch of the active job; None when idle,
   while a job waits for enough geometry to start (each such call counts as one batch of
   waiting, bounded by START_WAIT_S), and in fast mode (realtime=False) while starved or
@@ -42,15 +46,16 @@ START_TOL axis units); a job that starts elsewhere is rejected (`rejected` with 
 own to get there. The first job after start-up has no known position and is accepted.
 
 Faults:
-- A seq gap that outlasts gap_timeout_s (or too many segments waiting behind one) is the
-  job's fault, not the machine's: `rejected` (the missing seq) and `fault` events; a job
-  that is running ends at the end of the contiguous geometry it has (its window already
-  ends at rest there, so this is a normal in-limit stop, not an emergency one), then
-  `job_finished` with `aborted: true`; a job that has not started is dropped. The fault
-  does not latch: the machine is at rest at a known position, and the next job runs only
-  if it starts exactly there (the start check above), so continuing is safe. Status shows
-  `fault` while the job runs out and keeps the reason in `error` until the next job
-  starts or a `reset`.
+- A seq gap that outlasts gap_timeout_s (counted from the arrival of the first segment
+  waiting behind it, while `missing` events ask for the resend) is the job's fault, not
+  the machine's: `rejected` (the missing seq) and `fault` events; a job that is running
+  ends at the end of the contiguous geometry it has (its window already ends at rest
+  there, so this is a normal in-limit stop, not an emergency one), then `job_finished`
+  with `aborted: true`; a job that has not started is dropped. The fault does not latch:
+  the machine is at rest at a known position, and the next job runs only if it starts
+  exactly there (the start check above), so continuing is safe. Status shows `fault`
+  while the job runs out and keeps the reason in `error` until the next job starts or a
+  `reset`.
 - Anything else (no plan from a job's start, an internal error) latches: the active job
   stops along the path within the limits, status stays `fault` and no job starts until
   `reset`.
@@ -68,12 +73,13 @@ import numpy as np
 from lookahead.config import Config
 from lookahead.limits import AxisLimits
 from lookahead.planning.base import PathState, Planner, PlanningError, PlanRequest
+from lookahead.planning.place import describe_place, failure_s
 from lookahead.protocol import Command, CommandReply, Event, Segment, SetpointBatch, Status
 from lookahead.stream.assembler import (
-    JobFaultError,
     JobGeometry,
     SegmentOrder,
     SegmentRejectedError,
+    segment_size,
 )
 from lookahead.stream.plans import (
     S_TOL,
@@ -123,6 +129,7 @@ class _Job:
     override_pending: bool = False
     last_try: int = 0
     last_fail: int = -(10**9)  # sample index of the last failed replan (retry backoff)
+    fallbacks_at_start: int = 0  # engine.fallbacks when the job started (job_finished)
 
 
 class Engine:
@@ -170,6 +177,8 @@ class Engine:
         self._last_job: str | None = None
         self._position: np.ndarray | None = None  # last published sample, None at start-up
         self._job_error: str | None = None  # a job-scoped fault, shown until the next job
+        self._receiving: str | None = None  # the job of the last segment taken in
+        self._buffered = (0, 0)  # see `buffered`
 
     # --- input ------------------------------------------------------------------------
     def submit(self, seg: Segment, now_s: float | None = None) -> list[Event]:
@@ -186,28 +195,66 @@ class Engine:
         job = self._jobs.get(seg.job)
         if job is None:
             order = SegmentOrder(seg.job, self.config.service.gap_timeout_s)
-            geo = JobGeometry(seg.job, self.axes, self.path_scale, self.config.planner.fit)
+            geo = JobGeometry(seg.job, self.axes, self.path_scale, self.config.planner.fit,
+                              self.config.planner.tolerance)
             job = _Job(seg.job, order, geo, tail=np.empty((0, len(self.axes))))
+        fresh = job.order.admission(seg) != "duplicate"
         try:
             ready = job.order.offer(seg, now_s)
         except SegmentRejectedError as exc:
             self._reject(seg.job, exc.seq, exc.reason)
-            ready = []
-        except JobFaultError as exc:
-            self._jobs.setdefault(job.id, job)
-            self._seq_fault(job, str(exc))
-            return self._events[mark:]
+            ready, fresh = [], False
+        if fresh:
+            size = segment_size(seg)
+            self._buffered = (self._buffered[0] + size[0], self._buffered[1] + size[1])
         while ready:
             nxt = ready.pop()
             try:
                 job.geo.add(nxt)
             except SegmentRejectedError as exc:
+                job.order.refused(nxt)
                 self._reject(job.id, nxt.seq, exc.reason)
                 continue
+            for warning in job.geo.drain_warnings():  # fit excursions (cubic, pchip)
+                self._emit("warning", job.id, self._last_k, **warning)
             ready = job.order.accepted(nxt)
         if job.geo.nsegments or job.order.waiting:
             self._jobs.setdefault(job.id, job)
+            self._receiving = job.id
         return self._events[mark:]
+
+    def admission(self, seg: Segment) -> str:
+        """How `submit` would treat `seg` by its job and seq: `duplicate` (a seq the job
+        already has), `gap` (it fills a gap that waiting segments sit behind) or `new`
+        (the service takes `new` ones only while its buffer is not full)."""
+        job = self._jobs.get(seg.job)
+        return "new" if job is None else job.order.admission(seg)
+
+    def announce_missing(self, now_s: float) -> list[Event]:
+        """`missing` events for the seqs that jobs wait for (PROTOCOL.md "Delivery"): new
+        gaps at once, open ones again every MISSING_REPEAT_S."""
+        mark = len(self._events)
+        for job in self._jobs.values():
+            if job.fault is None and job.order.waiting:
+                k = max(job.k - 1, 0) if job is self._active else 0
+                for seq in job.order.announce(now_s):
+                    self._emit("missing", job.id, k, seq=seq)
+        return self._events[mark:]
+
+    @property
+    def buffered(self) -> tuple[int, int]:
+        """(points, bytes) received but not executed, as of the last `status()` plus what
+        came in since (an upper bound between two `status()` calls)."""
+        return self._buffered
+
+    def _count_buffered(self, job: _Job | None, s_now: float) -> tuple[int, int]:
+        points, nbytes = 0, 0
+        for j in self._jobs.values():
+            p, b = (j.geo.unexecuted_size(s_now, self._tol(j)) if j is job
+                    else j.geo.unexecuted_size(None))
+            points += p + j.order.pending_points
+            nbytes += b + j.order.pending_bytes
+        return points, nbytes
 
     def expire_gaps(self, now_s: float) -> list[Event]:
         """Fault every job whose missing seq has waited longer than gap_timeout_s."""
@@ -218,9 +265,10 @@ class Engine:
                                 f"did not arrive within {job.order.gap_timeout_s} s")
         return self._events[mark:]
 
-    def reject(self, reason: str, job: str | None = None, seq: int | None = None) -> Event:
-        """A `rejected` event for a message that could not be decoded."""
-        return self._reject(job, seq, reason)
+    def reject(self, reason: str, job: str | None = None, seq: int | None = None,
+               **extra) -> Event:
+        """A `rejected` event for a message that could not be decoded or was turned away."""
+        return self._reject(job, seq, reason, **extra)
 
     def drain_events(self) -> list[Event]:
         out, self._events = self._events, []
@@ -241,6 +289,7 @@ class Engine:
                 return self._empty_job(job)
             self._active = job
             job.started = True
+            job.fallbacks_at_start = self.fallbacks
             self._job_error = None
             self._emit("job_started", job.id, 0)
         return self._produce(self._active)
@@ -379,8 +428,13 @@ class Engine:
         except (PlanningError, ValueError, RuntimeError, ArithmeticError) as exc:
             if self.stop_planner is self.planner:
                 raise
-            log.info("%s failed at k=%d (%s); falling back to %s", self.planner.name, k_plan,
-                     exc, self.stop_planner.name)
+            # a fallback is a failure of the configured planner (issue 13): counted in
+            # status and job_finished, logged with the reason and the place on the path
+            s_fail = failure_s(exc, request.start.s)
+            log.warning("%s failed (fallback to %s) at k=%d, %s, window s=%.6g..%.6g from "
+                        "v=%.6g a=%.6g: %s", self.planner.name, self.stop_planner.name,
+                        k_plan, describe_place(request.path, s_fail), request.start.s,
+                        request.s_end, request.start.v, request.start.a, exc)
         plan = plan_checked(self.stop_planner, request, k_plan, tail, self.limits, previous)
         self.fallbacks += 1
         return plan
@@ -548,14 +602,17 @@ class Engine:
 
     # --- status -----------------------------------------------------------------------
     def status(self) -> Status:
+        """The state as of the last produced sample; also recounts `buffered` exactly."""
         job = self._active
         name = self.planner.name
         if job is None:
             state = "fault" if self.fault else "idle"
             queued = sum(j.geo.nsegments + j.order.waiting for j in self._jobs.values())
             head = next(iter(self._jobs), None)
+            self._buffered = self._count_buffered(None, 0.0)
             return Status(state, head or self._last_job, self._last_k, queued, 0.0,
-                          self.override, name, self.plan_ms, self.fault or self._job_error)
+                          self.override, name, self.plan_ms, self.fault or self._job_error,
+                          **self._flow())
         if self.fault or job.fault:
             state = "fault"
         elif job.hold:
@@ -571,8 +628,24 @@ class Engine:
         queued += sum(j.geo.nsegments + j.order.waiting for j in self._jobs.values()
                       if j is not job)
         horizon = job.plan.remaining_s(k_last, self.dt) if job.plan is not None else 0.0
+        self._buffered = self._count_buffered(job, s_now)
         return Status(state, job.id, k_last, queued, horizon, self.override, name,
-                      self.plan_ms, self.fault or job.fault)
+                      self.plan_ms, self.fault or job.fault, **self._flow())
+
+    def _flow(self) -> dict:
+        """The flow-control fields of the status (PROTOCOL.md "Status")."""
+        rec = self._jobs.get(self._receiving) if self._receiving is not None else None
+        return {"receiving": None if rec is None else rec.id,
+                "next_seq": None if rec is None else rec.order.expected,
+                "buffered_points": self._buffered[0], "accepting": not self.full,
+                "fallbacks": self.fallbacks}
+
+    @property
+    def full(self) -> bool:
+        """True while the buffer is at a cap (service.max_buffered_points / _bytes)."""
+        svc = self.config.service
+        return (self._buffered[0] >= svc.max_buffered_points
+                or self._buffered[1] >= svc.max_buffered_bytes)
 
     @property
     def active_job(self) -> str | None:
@@ -589,9 +662,9 @@ class Engine:
         self._events.append(event)
         return event
 
-    def _reject(self, job: str | None, seq: int | None, reason: str) -> Event:
+    def _reject(self, job: str | None, seq: int | None, reason: str, **extra) -> Event:
         k = self._active.k - 1 if self._active is not None and job == self._active.id else 0
-        return self._emit("rejected", job, max(k, 0), seq=seq, reason=reason)
+        return self._emit("rejected", job, max(k, 0), seq=seq, reason=reason, **extra)
 
     def _seq_fault(self, job: _Job, reason: str) -> None:
         """A seq gap that timed out: the job ends at the end of what it has (see the
@@ -624,6 +697,7 @@ class Engine:
 
     def _finish(self, job: _Job, aborted: bool) -> None:
         extra = {"aborted": True} if aborted else {}
+        extra["fallbacks"] = self.fallbacks - job.fallbacks_at_start
         self._emit("job_finished", job.id, job.k - 1 if job.k else 0,
                    duration_s=max(job.k - 1, 0) * self.dt, **extra)
         self._drop(job)
