@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -81,13 +82,15 @@ def wait_subscribed(env, *suffixes: str, timeout: float = 30.0) -> None:
         session.close()
 
 
-def wait_running(env, timeout: float = 30.0) -> None:
-    """Wait until `lookahead status` says the service is running a job."""
+def wait_running(env, min_k: int = 0, timeout: float = 60.0) -> None:
+    """Wait until `lookahead status` says the service is running a job and has published
+    sample `min_k` of it (on a loaded machine real time starts late: no fixed sleep)."""
     deadline = time.monotonic() + timeout
     while True:
         status = subprocess.run([sys.executable, "-m", "lookahead", "status"], env=env,
                                 capture_output=True, text=True, timeout=20)
-        if "running" in status.stdout:
+        k = re.search(r" k=(\d+) ", status.stdout)
+        if "state=running" in status.stdout and k and int(k.group(1)) >= min_k:
             return
         assert time.monotonic() < deadline, f"not running: {status.stdout}"
 
@@ -183,8 +186,7 @@ def test_killed_planner_is_reported(tmp_path):
         wait_alive(env, "planner", "machine")
         wait_subscribed(env, "setpoints")
         pub = lookahead(env, "publish", "tube-9570", "--job", "doomed", "--timeout", "60")
-        wait_running(env)  # the winder is winding
-        time.sleep(1.0)
+        wait_running(env, min_k=1000)  # the winder is winding
         service.send_signal(signal.SIGKILL)
         assert winder.wait(timeout=20) == 1
         assert pub.wait(timeout=20) == 1

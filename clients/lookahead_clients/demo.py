@@ -7,6 +7,13 @@ LOOKAHEAD_ZENOH_LISTEN). Shows the publisher's progress, then the winder's repor
 time, peak fraction of each limit, violations, fibre-angle error) and the plot it wrote.
 Exit status 0 only if the report is clean. The subprocesses are always stopped (also on
 Ctrl-C, failure or `--timeout`); the service's log is kept in the output directory.
+`--monitor` also starts `lookahead monitor` beside them and prints its address (a live web
+page of the run).
+
+`--machine NAME` runs a shipped machine (`winder2`, `winder3`: X, C and the delivery head
+B; `winder4`: with a cross-feed Y) or a configuration file. A machine other than the
+two-drive winder winds a fiberpath-style G-code program written for it
+(`lookahead_clients.cam_program`, one helical circuit; `--preset` picks another job).
 """
 
 from __future__ import annotations
@@ -23,12 +30,22 @@ def add_parser(sub: argparse._SubParsersAction, name: str, help_text: str
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--fast", action="store_true",
                    help="no real-time pacing: plan and execute as fast as possible")
-    p.add_argument("--config", help="machine configuration TOML (default: built-in)")
-    p.add_argument("--preset", default="tube-1450", help="job to wind (default tube-1450)")
+    p.add_argument("--config", "--machine", dest="config", metavar="MACHINE",
+                   help="machine configuration: a TOML file or a shipped machine (winder2, "
+                        "winder3, winder4; default: the built-in two-drive winder)")
+    p.add_argument("--preset", default=None,
+                   help="job to wind: a preset, points or G-code file (default tube-1450 on "
+                        "the two-drive winder, else a generated fiberpath-style program)")
     p.add_argument("--out-dir", help="where the plot, report and logs go (default: a new "
                    "temporary directory)")
     p.add_argument("--timeout", type=float, default=600.0,
                    help="give up after this many seconds (default 600)")
+    p.add_argument("--monitor", action="store_true",
+                   help="also start `lookahead monitor` (a live web page of the run) and "
+                        "print its address; on a terminal it stays up after the job until "
+                        "Enter")
+    p.add_argument("--monitor-port", type=int, default=8470,
+                   help="the monitor's HTTP port (default 8470, a free one if busy)")
     return p
 
 
@@ -67,7 +84,8 @@ def run(args: argparse.Namespace) -> int:
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     out_dir = args.out_dir or tempfile.mkdtemp(prefix="lookahead-demo-")
     os.makedirs(out_dir, exist_ok=True)
-    plot = os.path.join(out_dir, f"{args.preset}.png")
+    args.preset = args.preset or default_job(args.config, out_dir)
+    plot = os.path.join(out_dir, f"{os.path.basename(args.preset)}.png")
     report_json = os.path.join(out_dir, "report.json")
     common = (["--config", args.config] if args.config else [])
     fast = ["--fast"] if args.fast else []
@@ -79,6 +97,12 @@ def run(args: argparse.Namespace) -> int:
             group.start("service", ["serve", *common, *fast], stdout=log, stderr=log)
             group.start("winder", ["winder", *common, *fast, "--jobs", "1", "--plot", plot,
                                    "--report-json", report_json])
+            monitor_url = None
+            if args.monitor:
+                monitor_url = _start_monitor(group, common, args.monitor_port)
+                if monitor_url is None:
+                    return _fail(group, "the monitor did not start", out_dir)
+                print(f"demo: monitor at {monitor_url} (open it in a browser)", flush=True)
             if not _wait_alive(args.config, group):
                 return _fail(group, "the service or the winder did not come up", out_dir)
             publish = group.start("publisher", ["publish", args.preset, *common,
@@ -87,9 +111,34 @@ def run(args: argparse.Namespace) -> int:
             if rc_pub != 0:
                 return _fail(group, f"the publisher failed (exit {rc_pub})", out_dir)
             rc_winder = group.wait(group.procs["winder"])
+            if monitor_url and rc_winder is not None and os.path.exists(report_json):
+                rc = _summarize(report_json, plot)
+                _linger(monitor_url)
+                return rc
         if rc_winder is None or not os.path.exists(report_json):
             return _fail(group, "the winder did not report", out_dir)
     return _summarize(report_json, plot)
+
+
+def default_job(config: str | None, out_dir: str) -> str:
+    """tube-1450 on the two-drive winder; on any other machine, a fiberpath-style program
+    for its mandrel (radius from the C axis' path_scale) written to `out_dir`."""
+    import os
+
+    from lookahead.config import load_config_or_exit
+    from lookahead_clients.cam_program import WindingProgram, gcode
+    from lookahead_clients.fibre import radius_from_path_scale
+
+    machine = load_config_or_exit(config).machine
+    if tuple(machine.axes) == ("X", "C"):
+        return "tube-1450"
+    radius = (radius_from_path_scale(machine.path_scale[machine.axes.index("C")])
+              if "C" in machine.axes else 100.0)
+    path = os.path.join(out_dir, f"{machine.id}-circuit.gcode")
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write(gcode(WindingProgram(length=200.0, radius=radius, circuits=1, hoop=False,
+                                      delivery="B" in machine.axes)))
+    return path
 
 
 def _wait_alive(config: str | None, group) -> bool:
@@ -112,6 +161,31 @@ def _wait_alive(config: str | None, group) -> bool:
         return True
     finally:
         close_session(session)
+
+
+def _start_monitor(group, common: list[str], port: int) -> str | None:
+    """Start `lookahead monitor` in `group`; its address (the first line it prints), or
+    None if it exited or the group's deadline passed first."""
+    import select
+    import subprocess
+
+    proc = group.start("monitor", ["monitor", *common, "--port", str(port)],
+                       stdout=subprocess.PIPE, text=True)
+    while proc.poll() is None and not group.expired():
+        if select.select([proc.stdout], [], [], 0.5)[0]:
+            line = proc.stdout.readline()
+            return line.split()[1] if line.startswith("monitor: http") else None
+    return None
+
+
+def _linger(url: str) -> None:
+    """On a terminal, keep the monitor up (its page shows the winder's report) until Enter."""
+    import contextlib
+
+    if not sys.stdin.isatty():
+        return
+    with contextlib.suppress(EOFError):
+        input(f"demo: the monitor stays at {url}; press Enter to stop it ")
 
 
 def _fail(group, why: str, out_dir: str) -> int:

@@ -57,6 +57,9 @@ class JobMonitor:
         self.underruns = 0
         self.final = False
         self.fault: str | None = None
+        #: window plans the service's configured planner could not make (its job_finished
+        #: event's `fallbacks`; None: not known). A fallback is a failure (issue 13).
+        self.fallbacks: int | None = None
         self._t0: float | None = None
         self.last_arrival = 0.0
         #: largest (arrival - due time) of a batch's first sample, s (< 0: all early)
@@ -129,7 +132,8 @@ class JobMonitor:
         fault = self.fault
         if fault is None and not self.final:
             fault = "the job ended without a final batch"
-        clean = (check.ok and self.gaps == 0 and self.underruns == 0 and fault is None)
+        clean = (check.ok and self.gaps == 0 and self.underruns == 0 and fault is None
+                 and not self.fallbacks)
         return {
             "v": 1,
             "job": self.job,
@@ -151,6 +155,7 @@ class JobMonitor:
             "fibre_angle_error_max": float(errors.max()) if errors.size else 0.0,
             "fibre_angle_error_mean": float(errors.mean()) if errors.size else 0.0,
             "fault": fault,
+            "fallbacks": self.fallbacks,
             "clean": bool(clean),
         }
 
@@ -172,6 +177,8 @@ def summary(report: dict) -> str:
     late_text = "" if late is None else f" (latest batch {1000 * late:+.1f} ms vs due)"
     lines.append(f"  max following error {fe}; gaps {report['gaps']}, "
                  f"underruns {report['underruns']}{late_text}")
+    fallbacks = report.get("fallbacks")
+    lines.append("  planner fallbacks " + ("unknown" if fallbacks is None else str(fallbacks)))
     lines.append(f"  fibre angle error on {len(report['traverses'])} traverses: max "
                  f"{report['fibre_angle_error_max']:.4f} deg, mean "
                  f"{report['fibre_angle_error_mean']:.4f} deg")

@@ -92,6 +92,9 @@ def run_winder(cfg, realtime: bool, max_jobs: int | None = None, buffer_s: float
     session = open_client_session(cfg.zenoh)
     try:
         subscribe(session, key(cfg.ns, "setpoints"), inbox)
+        events: queue.Queue = queue.Queue()
+        subscribe(session, key(cfg.ns, "events"), events)
+        fallbacks: dict[str, int] = {}  # job -> `fallbacks` of its job_finished event
         watch_liveliness(session, key(cfg.ns, "alive", "planner"), inbox)
         report_pub = publisher(session, key(cfg.ns, "machine", "report"))
         token = session.liveliness().declare_token(key(cfg.ns, "alive", "machine"))
@@ -101,6 +104,7 @@ def run_winder(cfg, realtime: bool, max_jobs: int | None = None, buffer_s: float
         finished: set[str] = set()
 
         def finish(monitor: JobMonitor) -> None:
+            monitor.fallbacks = job_fallbacks(events, fallbacks, monitor.job)
             report = monitor.report()
             finished.add(monitor.job)
             report_pub.put(msgpack.packb(report, use_bin_type=True))
@@ -152,3 +156,32 @@ def run_winder(cfg, realtime: bool, max_jobs: int | None = None, buffer_s: float
     finally:
         close_session(session)
     return reports
+
+
+#: how long a finished job's report waits for the service's job_finished event (s)
+EVENT_GRACE_S = 1.0
+
+
+def job_fallbacks(events: queue.Queue, seen: dict[str, int], job: str) -> int | None:
+    """The `fallbacks` of `job`'s job_finished event (window plans the configured planner
+    could not make), read from the events queue for up to EVENT_GRACE_S; None if it did
+    not come (or came from a service without the field)."""
+    from lookahead.protocol import Event, ProtocolError
+
+    deadline = time.monotonic() + EVENT_GRACE_S
+    while job not in seen:
+        try:
+            item = events.get(timeout=max(deadline - time.monotonic(), 0.0))
+        except queue.Empty:
+            return None
+        if item.kind != "put":
+            continue
+        try:
+            event = Event.decode(item.payload)
+        except ProtocolError:
+            continue
+        if event.type == "job_finished" and event.job is not None:
+            value = event.extra.get("fallbacks")
+            seen[event.job] = int(value) if isinstance(value, int) else -1
+    value = seen.pop(job)
+    return None if value < 0 else value

@@ -27,6 +27,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("lookahead_clients.demo", "service + winder + publisher together (tube-1450)"),
     "status": ("lookahead_clients.status", "ask the service for its status (healthcheck)"),
     "cmd": ("lookahead_clients.command", "hold, resume, override, abort or reset the service"),
+    "monitor": ("lookahead_clients.monitor.cli", "watch machines live in a web browser"),
 }
 
 EXIT_NOT_BUILT = 3
@@ -41,11 +42,15 @@ BUS_OPTIONS: dict[str, str] = {
 }
 
 
-def _add_bus_options(parser: argparse.ArgumentParser) -> None:
+def _add_bus_options(parser: argparse.ArgumentParser, many_ids: bool = False) -> None:
     group = parser.add_argument_group(
         "bus", "override the configuration's machine id and zenoh session (the same as the "
         "LOOKAHEAD_MACHINE_ID / LOOKAHEAD_ZENOH_* environment variables)")
-    group.add_argument("--machine-id", metavar="ID", help="namespace lookahead/ID")
+    if many_ids:  # the monitor watches several machines
+        group.add_argument("--machine-id", metavar="ID", action="append",
+                           help="namespace lookahead/ID (repeatable, or a comma list)")
+    else:
+        group.add_argument("--machine-id", metavar="ID", help="namespace lookahead/ID")
     group.add_argument("--zenoh-mode", choices=("peer", "client", "router"))
     group.add_argument("--connect", metavar="ENDPOINT", action="append",
                        help="connect to ENDPOINT, e.g. tcp/router:7447 (repeatable)")
@@ -92,7 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
             continue
         p = module.add_parser(sub, name, help_text)
         if name != "plan":  # plans offline, never touches the bus
-            _add_bus_options(p)
+            _add_bus_options(p, many_ids=name == "monitor")
         p.set_defaults(func=module.run)
     return parser
 

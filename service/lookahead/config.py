@@ -27,7 +27,9 @@ from lookahead.protocol import JOB_ID_RE
 
 PLANNER_METHODS = ("heuristic", "lp")
 ZENOH_MODES = ("peer", "client", "router")
-FITS = ("cubic", "pchip")
+GCODE_DIALECTS = ("marlin", "rs274")
+GCODE_AXIS_LETTERS = "XYZUVWABC"
+FITS = ("cubic", "pchip", "linear", "smooth")
 _ENDPOINT_RE = re.compile(
     r"^(?P<proto>tcp|udp|tls|quic|ws|unixsock-stream|serial)/(?P<addr>[^#?]+)(?:[#?].*)?$"
 )
@@ -76,6 +78,9 @@ class PlannerSection:
     margin: float = 0.98
     #: default fit of `points` segments when a job's segment 0 names none
     fit: str = "cubic"
+    #: how far fits `linear` (corner blends) and `smooth` may leave the points' polyline,
+    #: path units, where a segment gives no `tolerance` (0: exact stop at every corner)
+    tolerance: float = 0.05
 
 
 @dataclass(frozen=True)
@@ -86,6 +91,34 @@ class ServiceSection:
     lead_s: float = 0.05  # real-time mode: publish this far ahead of due time
     status_hz: float = 10.0
     gap_timeout_s: float = 5.0  # how long a missing seq is waited for
+    #: caps on what the service holds received but not executed (points and control
+    #: points; estimated bytes: arrays plus the measured per-point and per-segment cost of
+    #: the fits, stream/assembler.py): `accepting` turns false at either. They trade memory
+    #: for how far ahead a publisher may send without pacing: a 568 x 200-point CAM program
+    #: (~240 MB by the estimate, an upper bound) fits in one burst.
+    max_buffered_points: int = 250_000
+    max_buffered_bytes: int = 512 * 1024 * 1024
+
+
+@dataclass(frozen=True)
+class GcodeSection:
+    """G-code input: which letter drives which machine axis, letters to drop, dialect."""
+
+    #: "LETTER:AXIS" pairs; letters X Y Z U V W are linear (G20 converts them), A B C rotary.
+    #: Empty (the default) means `auto_letters` of the machine's axes: X -> X, A -> C on the
+    #: two-drive winder.
+    letters: tuple[str, ...] = ()
+    #: letters a program may use that this machine drops (with a warning), e.g. ["B"]
+    ignore: tuple[str, ...] = ()
+    #: "marlin" (fiberpath's target: G0 takes the modal F like G1) or "rs274" (LinuxCNC:
+    #: G0 is a rapid that ignores F; F applies to the linear axes when any of them moves)
+    dialect: str = "marlin"
+
+    @property
+    def letter_map(self) -> dict[str, str]:
+        """{letter: machine axis} of `letters` (upper-case letters)."""
+        return {pair.split(":", 1)[0].strip().upper(): pair.split(":", 1)[1].strip()
+                for pair in self.letters}
 
 
 @dataclass(frozen=True)
@@ -105,6 +138,7 @@ class Config:
     machine: MachineSection = MachineSection()
     planner: PlannerSection = PlannerSection()
     service: ServiceSection = ServiceSection()
+    gcode: GcodeSection = GcodeSection()
     zenoh: ZenohSection = ZenohSection()
 
     @property
@@ -112,13 +146,51 @@ class Config:
         """Key namespace, lookahead/<machine-id>."""
         return f"lookahead/{self.machine.id}"
 
+    @property
+    def gcode_letters(self) -> dict[str, str]:
+        """G-code letter -> machine axis: `gcode.letters`, or `auto_letters` of the machine's
+        axes where it is empty."""
+        if self.gcode.letters:
+            return self.gcode.letter_map
+        return GcodeSection(letters=auto_letters(self.machine.axes)).letter_map
+
+    def gcode_options(self, ignore: str | tuple[str, ...] = (), dialect: str | None = None
+                      ) -> dict[str, Any]:
+        """Keyword arguments of `lookahead.geometry.gcode.read_gcode` for this machine:
+        its letters, axes, path metric, `gcode.ignore` plus `ignore` (letters, e.g. "B" or
+        "B,Y"), and `dialect` (default `gcode.dialect`)."""
+        extra = tuple(ignore.replace(",", " ").split()) if isinstance(ignore, str) else ignore
+        return {"axis_map": self.gcode_letters, "axes": list(self.machine.axes),
+                "ignore": tuple(x.upper() for x in (*self.gcode.ignore, *extra)),
+                "dialect": dialect or self.gcode.dialect,
+                "path_scale": list(self.machine.path_scale)}
+
 
 _SECTIONS: dict[str, type] = {
     "machine": MachineSection,
     "planner": PlannerSection,
     "service": ServiceSection,
+    "gcode": GcodeSection,
     "zenoh": ZenohSection,
 }
+
+
+def machine_names() -> list[str]:
+    """The shipped machine configurations (package `lookahead.machines`)."""
+    from importlib import resources
+
+    return sorted(p.name[:-5] for p in resources.files("lookahead.machines").iterdir()
+                  if p.name.endswith(".toml"))
+
+
+def shipped_machine(name: str) -> str | None:
+    """The file of shipped machine `name` if `name` is one and no file of that name exists
+    here, else None."""
+    from importlib import resources
+
+    if Path(name).exists() or name not in machine_names():
+        return None
+    return str(resources.files("lookahead.machines") / f"{name}.toml")
 
 
 def default_config() -> Config:
@@ -127,7 +199,10 @@ def default_config() -> Config:
 
 def load_config(path: str | os.PathLike[str] | None = None,
                 environ: Mapping[str, str] | None = None) -> Config:
-    """Load a TOML file (None: defaults only), then environment overrides; validate."""
+    """Load a TOML file (None: defaults only), then environment overrides; validate. `path`
+    may also name a shipped machine (`machine_names`, e.g. "winder3")."""
+    if path is not None:
+        path = shipped_machine(str(path)) or path
     source = str(path) if path is not None else "<defaults>"
     raw: dict[str, Any] = {}
     if path is not None:
@@ -288,6 +363,8 @@ def _check_section(name: str, sec: Any, source: str, errors: list[str]) -> None:
             err("margin", f"must be in [0.5, 1], got {sec.margin}")
         if sec.fit not in FITS:
             err("fit", f"unknown fit {sec.fit!r} (known: {', '.join(FITS)})")
+        if not (math.isfinite(sec.tolerance) and sec.tolerance >= 0):
+            err("tolerance", f"must be finite and >= 0, got {sec.tolerance}")
     elif name == "service":
         if sec.batch < 1:
             err("batch", f"must be >= 1, got {sec.batch}")
@@ -296,6 +373,11 @@ def _check_section(name: str, sec: Any, source: str, errors: list[str]) -> None:
                 err(key_name, f"must be finite and > 0, got {getattr(sec, key_name)}")
         if sec.status_hz < 5:
             err("status_hz", f"must be >= 5 (PROTOCOL.md), got {sec.status_hz}")
+        for key_name in ("max_buffered_points", "max_buffered_bytes"):
+            if getattr(sec, key_name) < 1:
+                err(key_name, f"must be >= 1, got {getattr(sec, key_name)}")
+    elif name == "gcode":
+        _check_gcode(sec, err)
     elif name == "zenoh":
         if sec.mode not in ZENOH_MODES:
             err("mode", f"unknown zenoh mode {sec.mode!r} (known: {', '.join(ZENOH_MODES)})")
@@ -308,9 +390,76 @@ def _check_section(name: str, sec: Any, source: str, errors: list[str]) -> None:
             err("config_file", f"no such file {sec.config_file!r}")
 
 
+def auto_letters(axes: tuple[str, ...]) -> tuple[str, ...]:
+    """The letter map a machine gets when its configuration names none: each axis named by a
+    G-code axis letter is driven by that letter, except that a mandrel axis C with no A axis
+    beside it is driven by A (winder CAM such as fiberpath writes the mandrel as A)."""
+    out = []
+    for axis in axes:
+        letter = axis.strip().upper()
+        if letter == "C" and "A" not in axes:
+            letter = "A"
+        if len(letter) == 1 and letter in GCODE_AXIS_LETTERS:
+            out.append(f"{letter}:{axis}")
+    return tuple(out)
+
+
+def _check_gcode(sec: GcodeSection, err) -> None:
+    """The letter map's own form (the axes it names are checked against the machine in
+    `_check_cross`)."""
+    seen: dict[str, int] = {}
+    for i, pair in enumerate(sec.letters):
+        letter, sep, axis = pair.partition(":")
+        letter = letter.strip().upper()
+        if not sep or not axis.strip():
+            err(f"letters[{i}]", f"expected \"LETTER:AXIS\" such as \"A:C\", got {pair!r}")
+        elif len(letter) != 1 or letter not in GCODE_AXIS_LETTERS:
+            err(f"letters[{i}]", f"{letter!r} is not a G-code axis letter "
+                f"({', '.join(GCODE_AXIS_LETTERS)})")
+        elif letter in seen:
+            err(f"letters[{i}]", f"letter {letter} is mapped twice (also letters[{seen[letter]}])")
+        else:
+            seen[letter] = i
+    for i, letter in enumerate(sec.ignore):
+        up = letter.strip().upper()
+        if len(up) != 1 or up not in GCODE_AXIS_LETTERS:
+            err(f"ignore[{i}]", f"{letter!r} is not a G-code axis letter "
+                f"({', '.join(GCODE_AXIS_LETTERS)})")
+        elif up in seen:
+            err(f"ignore[{i}]", f"letter {up} is mapped to an axis by gcode.letters; it cannot "
+                "also be ignored")
+    if sec.dialect not in GCODE_DIALECTS:
+        err("dialect", f"unknown dialect {sec.dialect!r} (known: {', '.join(GCODE_DIALECTS)})")
+
+
 def _check_cross(values: dict[str, Any], source: str, errors: list[str]) -> None:
     if values["zenoh"].mode == "client" and not values["zenoh"].connect:
         errors.append(f"{source}: zenoh.connect: client mode needs at least one endpoint")
+    if not values["gcode"].letters:
+        return  # auto_letters: valid by construction
+    axes = values["machine"].axes
+    by_axis: dict[str, str] = {}
+    for i, pair in enumerate(values["gcode"].letters):
+        letter, _, axis = (p.strip() for p in pair.partition(":"))
+        if axis not in axes:
+            errors.append(f"{source}: gcode.letters[{i}]: {letter.upper()} -> {axis}, but the "
+                          f"machine has no axis {axis} (machine.axes: {list(axes)})")
+        elif axis in by_axis:
+            errors.append(f"{source}: gcode.letters[{i}]: two letters on axis {axis} "
+                          f"({by_axis[axis]} and {letter.upper()})")
+        else:
+            by_axis[axis] = letter.upper()
+    missing = [a for a in axes if a not in by_axis]
+    if missing and len(by_axis) == len(values["gcode"].letters):
+        errors.append(f"{source}: gcode.letters: no letter drives axis "
+                      f"{', '.join(missing)} (add e.g. \"{_letter_hint(missing[0])}:"
+                      f"{missing[0]}\")")
+
+
+def _letter_hint(axis: str) -> str:
+    """A plausible G-code letter for a machine axis named `axis` (for error messages)."""
+    up = axis.strip().upper()
+    return up if len(up) == 1 and up in GCODE_AXIS_LETTERS else "B"
 
 
 def endpoint_problem(endpoint: str) -> str | None:
