@@ -62,9 +62,11 @@ def load_planner(method: str):
 
 
 def _read_input(args: argparse.Namespace, config
-                ) -> tuple[list[str], np.ndarray, np.ndarray | None, float | None]:
+                ) -> tuple[list[str], np.ndarray, np.ndarray | None, float | None,
+                           np.ndarray | None]:
     """(axes, points, per-point tolerance from G-code or None, the G-code program's own
-    time estimate in s or None)."""
+    time estimate in s or None, per-point feed caps from G-code (path units/s, NaN = none;
+    each caps the move that ends at its point) or None)."""
     axes = list(config.machine.axes)
     from lookahead.geometry.winding import PRESETS, preset_points
 
@@ -76,7 +78,7 @@ def _read_input(args: argparse.Namespace, config
         if circuits is not None and circuits != "layer":
             circuits = int(circuits)
         names, points, _ = preset_points(preset, circuits)
-        return names, points, None, None
+        return names, points, None, None, None
     path = FilePath(args.input)
     if path.suffix.lower() in _GCODE_SUFFIXES:
         from lookahead.geometry.gcode import read_gcode
@@ -87,11 +89,34 @@ def _read_input(args: argparse.Namespace, config
             print(f"lookahead plan: warning: dropped {count} {letter} word(s): the machine has "
                   f"no drive for letter {letter} (gcode.ignore / --ignore-letters)",
                   file=sys.stderr)
-        return list(result.axes), result.points, result.tolerance, result.programmed_time_s
+        return (list(result.axes), result.points, result.tolerance, result.programmed_time_s,
+                result.feed)
     from lookahead.geometry.files import load_points_file
 
     names, points = load_points_file(path, axes if path.suffix.lower() == ".npy" else None)
-    return names, points, None, None
+    return names, points, None, None, None
+
+
+def _feed_cap(points: np.ndarray, feeds: np.ndarray | None, scale: np.ndarray,
+              length: float):
+    """The G-code feed caps as a FeedCap over s, or None. A point's cap holds on the move
+    that ends there; the moves' places in s are their cumulative chord lengths in the path
+    metric, scaled to the fitted path's length (the fits stay within their tolerance of the
+    polyline, so a cap moves by at most about that)."""
+    from lookahead.planning.base import FeedCap
+
+    if feeds is None or not np.any(np.isfinite(feeds[1:])):
+        return None
+    chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0) * scale,
+                                                          axis=1))])
+    s_at = chord * (length / chord[-1])
+    caps = np.where(np.isfinite(feeds[1:]), feeds[1:], np.inf)
+    change = np.flatnonzero(caps[1:] != caps[:-1]) + 1
+    starts = np.concatenate([[0], change])
+    breaks = np.concatenate([s_at[starts], [length]])
+    values = caps[starts]
+    values = np.where(np.isfinite(values), values, 1e12)  # no cap: far above any feed
+    return FeedCap(breaks, values)
 
 
 def _drop_repeats(points: np.ndarray) -> np.ndarray:
@@ -119,13 +144,14 @@ def run(args: argparse.Namespace) -> int:
     try:
         config = load_config(args.config) if args.config else default_config()
         machine = config.machine
-        axes, points, point_tol, program_time = _read_input(args, config)
+        axes, points, point_tol, program_time, feeds = _read_input(args, config)
         if list(axes) != list(machine.axes):
             raise ValueError(f"input axes {axes} differ from the machine's {list(machine.axes)}")
         points = np.asarray(points, dtype=float)
         keep = _drop_repeats(points)
         points = points[keep]
         point_tol = None if point_tol is None else point_tol[keep]
+        feeds = None if feeds is None else feeds[keep]
         if len(points) < 2:
             raise ValueError("the input has fewer than 2 distinct points")
         fit = args.fit or (GCODE_FIT if point_tol is not None else config.planner.fit)
@@ -142,7 +168,8 @@ def run(args: argparse.Namespace) -> int:
     method = args.method or config.planner.method
     planner = load_planner(method)
     limits, dt = machine.limits, machine.dt
-    request = PlanRequest(path, limits, PathState(0.0), path.length, dt=dt)
+    request = PlanRequest(path, limits, PathState(0.0), path.length, dt=dt,
+                          feed_cap=_feed_cap(points, feeds, scale, path.length))
     try:
         result = planner.plan(request)
     except (PlanningError, ValueError, RuntimeError, ArithmeticError) as exc:
