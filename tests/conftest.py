@@ -16,6 +16,24 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(skip)
 
 
+@pytest.fixture
+def harness_factory():
+    """make(cfg) -> a fast-mode service `Harness` (tests/service_harness.py) on the bus,
+    closed after the test."""
+    from service_harness import Harness
+
+    made = []
+
+    def make(cfg):
+        h = Harness(cfg, fast=True)
+        made.append(h)
+        return h
+
+    yield make
+    for h in made:
+        h.close()
+
+
 @pytest.fixture(autouse=True)
 def _no_lookahead_environment(monkeypatch: pytest.MonkeyPatch) -> None:
     """Tests see the built-in configuration, whatever LOOKAHEAD_* the shell has set."""

@@ -9,7 +9,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 sys.path.insert(0, str(Path(__file__).parent.parent))
@@ -21,23 +20,9 @@ from lookahead.config import default_config
 from lookahead.service import INCOMING_MAX, INCOMING_MAX_BYTES
 from lookahead.stream.assembler import POINT_OVERHEAD_BYTES, SEGMENT_OVERHEAD_BYTES
 from lookahead_clients.job_source import make_segments
-from service_harness import Harness, check_job
+from service_harness import check_job
 
 N_BURST = 10_000
-
-
-@pytest.fixture
-def harness_factory():
-    made: list[Harness] = []
-
-    def make(cfg) -> Harness:
-        h = Harness(cfg, fast=True)
-        made.append(h)
-        return h
-
-    yield make
-    for h in made:
-        h.close()
 
 
 def test_burst_of_10000_segments_arrives_complete_with_bounded_memory(harness_factory):

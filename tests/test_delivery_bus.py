@@ -19,25 +19,11 @@ from delivery_harness import bus_config, deliver_then_run, rechunk, status
 from lookahead.checker import LimitChecker
 from lookahead.config import default_config
 from lookahead.protocol import Segment
-from service_harness import Harness, check_job, point_segments
+from service_harness import check_job, point_segments
 
 #: the issue's kind of job: a tube winding, cut into 20-point segments (113 of them)
 PATH = "w-issue-tube1450-R100-a45-sine-2mm"
 CHUNK = 20
-
-
-@pytest.fixture
-def harness_factory():
-    made: list[Harness] = []
-
-    def make(cfg) -> Harness:
-        h = Harness(cfg, fast=True)
-        made.append(h)
-        return h
-
-    yield make
-    for h in made:
-        h.close()
 
 
 def _arrays(batches):

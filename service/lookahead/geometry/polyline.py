@@ -59,6 +59,18 @@ _DEGREE = 5
 _SLIVER = 64.0 * np.finfo(float).eps
 
 
+def point_tolerances(n: int, tolerance: float | np.ndarray | None, default: float
+                     ) -> np.ndarray:
+    """One checked tolerance per point of a chunk of `n`: `tolerance` is one value, one per
+    point, or None; None and NaN mean `default`."""
+    tol = np.full(n, default) if tolerance is None else np.broadcast_to(
+        np.asarray(tolerance, dtype=float), (n,))
+    tol = np.where(np.isnan(tol), default, tol)
+    for t in tol:
+        check_tolerance(t)
+    return tol
+
+
 def check_tolerance(value: float, what: str = "tolerance") -> float:
     """`value` as a float; ValueError unless finite and >= 0."""
     out = float(value)
@@ -98,12 +110,7 @@ class LinearFit(PointStream):
     def extend(self, points: np.ndarray, tolerance: float | np.ndarray | None = None) -> None:
         """Append a chunk (n, naxes); `tolerance`: one value, one per point, or None (the
         fit's default; so is NaN). A point's tolerance applies to the corner at that point."""
-        n = len(np.asarray(points))
-        tol = np.full(n, self.tolerance) if tolerance is None else np.broadcast_to(
-            np.asarray(tolerance, dtype=float), (n,))
-        tol = np.where(np.isnan(tol), self.tolerance, tol)  # NaN: the default
-        for t in tol:
-            check_tolerance(t)
+        tol = point_tolerances(len(np.asarray(points)), tolerance, self.tolerance)
         rows = self._take(points)
         if rows is None:
             return

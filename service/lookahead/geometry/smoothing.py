@@ -27,7 +27,12 @@ import numpy as np
 
 from lookahead.geometry.base import Path
 from lookahead.geometry.control_spline import ControlSpline
-from lookahead.geometry.polyline import DEFAULT_TOLERANCE, MERGE_TOL, check_tolerance
+from lookahead.geometry.polyline import (
+    DEFAULT_TOLERANCE,
+    MERGE_TOL,
+    check_tolerance,
+    point_tolerances,
+)
 from lookahead.geometry.streaming import MIN_STEP, PointStream, _Buffer
 
 #: share of the tolerance taken by the simplification (the spline gets the rest): more
@@ -60,12 +65,7 @@ class SmoothFit(PointStream):
 
     def extend(self, points: np.ndarray, tolerance: float | np.ndarray | None = None) -> None:
         """Append a chunk (n, naxes); `tolerance` as `LinearFit.extend`."""
-        n = len(np.asarray(points))
-        tol = np.full(n, self.tolerance) if tolerance is None else np.broadcast_to(
-            np.asarray(tolerance, dtype=float), (n,))
-        tol = np.where(np.isnan(tol), self.tolerance, tol)  # NaN: the default
-        for t in tol:
-            check_tolerance(t)
+        tol = point_tolerances(len(np.asarray(points)), tolerance, self.tolerance)
         rows = self._take(points)
         if rows is None:
             return
