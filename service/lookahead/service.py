@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import collections
 import logging
+import math
 import queue
 import threading
 import time
@@ -65,7 +66,7 @@ TAKE_IN_MAX_S = 0.05
 #: fast mode: batches published between two looks at commands and status
 FAST_BURST = 50
 #: real-time mode: produce at least this far ahead of publication, plus 1.5 x the longest
-#: batch computation seen (a replan or a stop; a job's first batch does not count), at most
+#: batch computation seen (a replan, a stop or a job's first plan), at most
 #: MAX_AHEAD_S (s)
 MIN_AHEAD_S = 0.05
 MAX_AHEAD_S = 1.0
@@ -301,10 +302,12 @@ class PlannerService:
             return False
         t = time.monotonic()
         batch = self._next_batch()
-        if batch is None or batch.k0 > 0:
-            # a job's first batch (its first plan, the slowest computation of a job: ~40 ms
-            # for the LP) starts the job's clock when published, so nothing waits on it
-            self._max_compute_s = max(self._max_compute_s, time.monotonic() - t)
+        # every computation counts, a job's first batch too: its first plan (the slowest
+        # of a job) starts the job's clock when published, so nothing waits on it, but it
+        # is the best estimate of the replans that follow right after; without it the lead
+        # was 50 ms at a job's start and the real-time demo underran 7-14 times (both
+        # planners, quiet 2-core machine) once replans took longer than that
+        self._max_compute_s = max(self._max_compute_s, time.monotonic() - t)
         if batch is None:
             self._next_poll = now + self.config.service.batch * self.config.machine.dt
             return False
@@ -354,7 +357,12 @@ class PlannerService:
     # --- input ------------------------------------------------------------------------
     def _take_in(self, now: float) -> None:
         taken = False
-        until = time.monotonic() + TAKE_IN_MAX_S
+        start = time.monotonic()
+        # the time limit holds while a job runs (its batches must keep coming); before a
+        # job starts, everything queued is taken in at once, so that a job whose segments
+        # all arrived starts with all of them (cut at 50 ms, the demo's job started with
+        # part of its path and underran 5-14 times on the rest's take-in and replans)
+        until = start + (TAKE_IN_MAX_S if self.engine.active_job is not None else math.inf)
         while time.monotonic() < until:
             try:
                 payload = self._incoming.get_nowait()
@@ -364,15 +372,17 @@ class PlannerService:
             self._handle_payload(payload, now)
             taken = True
         if taken:
-            if self._filled_gap:
-                # a pass that took a resend in also took the segments waiting behind it: it
-                # held up production like a replan, so it counts toward the real-time
-                # buffer's lead (other passes do not: a job's first burst would lengthen
-                # every hold's latency)
-                self._filled_gap = False
+            if self._filled_gap or self.engine.active_job is not None:
+                # a pass while a job runs (or one that took a resend and the segments
+                # waiting behind it) held up production like a replan, so it counts toward
+                # the real-time buffer's lead. Passes before a job starts do not (nothing
+                # waits on them). Not counting the passes during a job made the real-time
+                # demo underrun 5-14 times: a job starts once its window is covered, and
+                # the rest of its segments (tens of ms each with the fits' checks) came in
+                # while it ran
                 self._max_compute_s = max(self._max_compute_s,
-                                          min(time.monotonic() - until + TAKE_IN_MAX_S,
-                                              MAX_AHEAD_S))
+                                          min(time.monotonic() - start, MAX_AHEAD_S))
+            self._filled_gap = False
             self._after_take_in(now)
 
     def _after_take_in(self, now: float) -> None:
