@@ -48,3 +48,22 @@ def test_motion_events_and_status_wait_for_their_samples_to_be_published():
             assert status.k == published - 1 and status.state == "running"
             assert status.horizon_s == pytest.approx((total - published) * dt)
     assert svc._status().state == "idle" and not svc._held
+
+
+def test_segments_queued_before_a_job_starts_are_all_taken_in_at_once(monkeypatch):
+    """Before a job runs, one take-in pass takes everything queued (the time limit holds only
+    while a job runs): a job whose segments all arrived starts with its whole path. Cut at
+    the limit, the demo's job started with part of its path and underran in real time."""
+    import lookahead.service as service_module
+    from lookahead_clients.job_source import make_segments
+
+    monkeypatch.setattr(service_module, "TAKE_IN_MAX_S", 0.0)  # any pass would stop at once
+    svc = PlannerService(service_config(), fast=False)  # never opened: no bus needed
+    t = np.linspace(0.0, 1.0, 600)
+    pts = np.column_stack([300.0 * t, 200.0 * t + 10.0 * np.sin(5 * t)])
+    segs = make_segments("all-in", ["X", "C"], pts, chunk=100)
+    for seg in segs:
+        svc._enqueue(seg.encode())
+    svc._take_in(0.0)
+    assert svc._incoming.empty() and svc.stats.segments == len(segs) == 6
+    assert svc.engine.status().queued == len(segs)
