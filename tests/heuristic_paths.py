@@ -66,6 +66,18 @@ def fourier_points(n: int = 3000, seed: int = 3) -> np.ndarray:
     return np.column_stack([x, c])
 
 
+def issue13_fourier_points(n: int = 3000, seed: int = 0) -> np.ndarray:
+    """Issue 13's smooth Fourier path: X a sum of random sines (mm), C increasing plus
+    small sines (deg); with seed 0, C reverses near s = 756 mm (a near-cusp)."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 1.0, n)
+    x = sum(rng.uniform(20, 150) * np.sin(2 * np.pi * (f * t + rng.uniform()))
+            for f in rng.integers(1, 8, 4))
+    c = 3600.0 * t + sum(rng.uniform(5, 40) * np.sin(2 * np.pi * (f * t + rng.uniform()))
+                         for f in rng.integers(2, 15, 3))
+    return np.column_stack([x, c])
+
+
 def wiggly_points(n: int = 400, seed: int = 5) -> np.ndarray:
     """A wiggly 2-axis (mm, mm) curve: a random walk smoothed by a few passes."""
     rng = np.random.default_rng(seed)

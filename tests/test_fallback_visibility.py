@@ -14,6 +14,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from heuristic_paths import issue13_fourier_points
 from lookahead import plan_cli
 from lookahead.checker import check_positions
 from lookahead.config import default_config
@@ -169,21 +170,12 @@ def sine_eased_tube(length: float, radius: float, alpha_deg: float, passes: int 
     return np.array(pts)
 
 
-def fourier_points(n: int = 3000, seed: int = 0) -> np.ndarray:
-    """X a sum of random sines (mm), C increasing plus small sines (deg)."""
-    rng = np.random.default_rng(seed)
-    t = np.linspace(0.0, 1.0, n)
-    x = sum(rng.uniform(20, 150) * np.sin(2 * np.pi * (f * t + rng.uniform()))
-            for f in rng.integers(1, 8, 4))
-    c = 3600.0 * t + sum(rng.uniform(5, 40) * np.sin(2 * np.pi * (f * t + rng.uniform()))
-                         for f in rng.integers(2, 15, 3))
-    return np.column_stack([x, c])
 
 
 @pytest.mark.parametrize("name, points", [
     ("tube-1450-sine", lambda: sine_eased_tube(1450.0, 100.0, 45.0)),
     # before issue 13's fixes: 24 fallbacks (every LP window from the first infeasible)
-    ("fourier-3000", fourier_points),
+    ("fourier-3000", issue13_fourier_points),
 ])
 def test_windowed_engine_on_issue_paths_makes_no_fallback(name, points):
     cfg = default_config()

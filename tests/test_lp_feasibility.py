@@ -26,6 +26,7 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
+from heuristic_paths import issue13_fourier_points
 from lookahead.checker import check_positions
 from lookahead.config import default_config
 from lookahead.geometry import fit_points, preset_points
@@ -45,21 +46,11 @@ from lookahead.sampling import sample_profile, sample_times
 MACHINE = default_config().machine
 
 
-def fourier_points(n: int = 3000, seed: int = 0) -> np.ndarray:
-    """Issue 13's smooth Fourier path: X a sum of random sines (mm), C increasing plus
-    small sines (deg); with seed 0, C reverses near s = 756 mm (a near-cusp)."""
-    rng = np.random.default_rng(seed)
-    t = np.linspace(0.0, 1.0, n)
-    x = sum(rng.uniform(20, 150) * np.sin(2 * np.pi * (f * t + rng.uniform()))
-            for f in rng.integers(1, 8, 4))
-    c = 3600.0 * t + sum(rng.uniform(5, 40) * np.sin(2 * np.pi * (f * t + rng.uniform()))
-                         for f in rng.integers(2, 15, 3))
-    return np.column_stack([x, c])
 
 
 @pytest.fixture(scope="module")
 def fourier_path():
-    return fit_points(fourier_points(), np.asarray(MACHINE.path_scale), "cubic")
+    return fit_points(issue13_fourier_points(), np.asarray(MACHINE.path_scale), "cubic")
 
 
 def played(path, profile, limits, dt, head: np.ndarray | None = None):
@@ -192,7 +183,8 @@ def test_near_reversals_are_found_between_feature_samples(near_cusp_paths):
             around = np.linspace(s0 - 0.05, s0 + 0.05, 2001)
             k = np.max(np.abs(path.eval_s(around, 2)[2] * scale), axis=1)
             assert abs(around[int(np.argmax(k))] - s0) < 1e-3
-    tube_like = fit_points(fourier_points(400, seed=1), np.asarray(MACHINE.path_scale), "cubic")
+    tube_like = fit_points(issue13_fourier_points(400, seed=1),
+                           np.asarray(MACHINE.path_scale), "cubic")
     assert near_reversals(tube_like, 6.0).size == 0
 
 

@@ -41,7 +41,7 @@ from lookahead.geometry.arclength import Leaves
 from lookahead.geometry.base import Path
 from lookahead.geometry.blends import turn_angle
 from lookahead.geometry.piecewise import ppoly_from_bspline
-from lookahead.geometry.polyline import MAX_BLEND_TURN, MIN_BLEND
+from lookahead.geometry.polyline import MAX_BLEND_TURN, MIN_BLEND, joined_spline_path
 from lookahead.geometry.spline_path import SplinePath
 from lookahead.geometry.streaming import _Buffer
 
@@ -232,14 +232,7 @@ class ControlSpline:
         x, coef = self._x.view(), self._coef.view()
         leaves = Leaves(self._leaf_start.view(), self._leaf_length.view(),
                         self._leaf_count.view())
-        end = self._u_final
-        if tail is not None:
-            x = np.concatenate([x, tail.x[:-1]])
-            coef = np.concatenate([coef, tail.c], axis=1)
-            leaves = Leaves.concat([leaves, SplinePath(tail, self.path_scale).leaves])
-            end = float(tail.x[-1])
-        pp = PPoly(coef, np.concatenate([x, [end]]), extrapolate=True)
-        return SplinePath(pp, self.path_scale, continuity=2, leaves=leaves)
+        return joined_spline_path(x, coef, leaves, self._u_final, tail, self.path_scale)
 
     def path_with(self, point: np.ndarray | None, c: float, tol: float) -> Path:
         """The path as if `point` were the last vertex (None: the current last vertex is

@@ -79,7 +79,47 @@ def check_tolerance(value: float, what: str = "tolerance") -> float:
     return out
 
 
-class LinearFit(PointStream):
+def joined_spline_path(x: np.ndarray, coef: np.ndarray, leaves: Leaves, end: float,
+                       extra: PPoly | None, path_scale: np.ndarray) -> Path:
+    """The final pieces (breakpoints `x` without the last one, `end`; coefficients `coef`;
+    arc-length `leaves`) followed by `extra` (a PPoly continuing at `end`, or None) as one
+    C2 SplinePath in the metric `path_scale`."""
+    if extra is not None:
+        x = np.concatenate([x, extra.x[:-1]])
+        coef = np.concatenate([coef, extra.c], axis=1)
+        leaves = Leaves.concat([leaves, SplinePath(extra, path_scale).leaves])
+        end = float(extra.x[-1])
+    pp = PPoly(coef, np.concatenate([x, [end]]), extrapolate=True)
+    return SplinePath(pp, path_scale, continuity=2, leaves=leaves)
+
+
+class TolerancePointStream(PointStream):
+    """A point stream whose points carry a corner tolerance (fits `linear`, `smooth`):
+    `extend` takes one per chunk or per point; subclasses build geometry in `_finalize`.
+
+    tolerance: the tolerance for chunks that give none (path units, >= 0)."""
+
+    def __init__(self, naxes: int, path_scale: np.ndarray,
+                 tolerance: float = DEFAULT_TOLERANCE, min_step: float = MIN_STEP) -> None:
+        super().__init__(naxes, path_scale, min_step)
+        self.tolerance = check_tolerance(tolerance)
+        self._tol = _Buffer(())  # the tolerance of each kept point
+
+    def extend(self, points: np.ndarray, tolerance: float | np.ndarray | None = None) -> None:
+        """Append a chunk (n, naxes); `tolerance`: one value, one per point, or None (the
+        fit's default; so is NaN). A point's tolerance applies to the corner at that point."""
+        tol = point_tolerances(len(np.asarray(points)), tolerance, self.tolerance)
+        rows = self._take(points)
+        if rows is None:
+            return
+        self._tol.append(tol[rows])
+        self._finalize()
+
+    def _finalize(self) -> None:
+        raise NotImplementedError
+
+
+class LinearFit(TolerancePointStream):
     """`linear` fit of a point stream received in chunks; see the module docstring.
 
     tolerance: the corner tolerance for chunks that give none (path units, >= 0)."""
@@ -88,9 +128,7 @@ class LinearFit(PointStream):
 
     def __init__(self, naxes: int, path_scale: np.ndarray,
                  tolerance: float = DEFAULT_TOLERANCE, min_step: float = MIN_STEP) -> None:
-        super().__init__(naxes, path_scale, min_step)
-        self.tolerance = check_tolerance(tolerance)
-        self._tol = _Buffer(())  # corner tolerance of each kept point
+        super().__init__(naxes, path_scale, tolerance, min_step)
         self._vert: list[int] = []  # kept-point index of each known vertex
         self._end = -1  # kept-point index of the open run's end (the newest point)
         self._done = 0  # kept points processed
@@ -105,17 +143,6 @@ class LinearFit(PointStream):
         #: per final corner: (u of the vertex, blend reach back l_in and on l_out along
         #: the lines, in u; 0, 0 = exact stop)
         self.blends: list[tuple[float, float, float]] = []
-
-    # --- input ------------------------------------------------------------------------
-    def extend(self, points: np.ndarray, tolerance: float | np.ndarray | None = None) -> None:
-        """Append a chunk (n, naxes); `tolerance`: one value, one per point, or None (the
-        fit's default; so is NaN). A point's tolerance applies to the corner at that point."""
-        tol = point_tolerances(len(np.asarray(points)), tolerance, self.tolerance)
-        rows = self._take(points)
-        if rows is None:
-            return
-        self._tol.append(tol[rows])
-        self._finalize()
 
     # --- geometry ---------------------------------------------------------------------
     def _finalize(self) -> None:
@@ -262,15 +289,8 @@ class LinearFit(PointStream):
         x, coef = self._x.view(), self._coef.view()
         leaves = Leaves(self._leaf_start.view(), self._leaf_length.view(),
                         self._leaf_count.view())
-        extra = self._ppoly(tail)
-        end = self._u_final
-        if extra is not None:
-            x = np.concatenate([x, extra.x[:-1]])
-            coef = np.concatenate([coef, extra.c], axis=1)
-            leaves = Leaves.concat([leaves, SplinePath(extra, self.path_scale).leaves])
-            end = float(extra.x[-1])
-        pp = PPoly(coef, np.concatenate([x, [end]]), extrapolate=True)
-        return SplinePath(pp, self.path_scale, continuity=2, leaves=leaves)
+        return joined_spline_path(x, coef, leaves, self._u_final, self._ppoly(tail),
+                                  self.path_scale)
 
     def _append_points(self, points: np.ndarray, u: np.ndarray, tol: np.ndarray) -> None:
         """Append kept points with given u (increasing, past the last) and tolerances, and

@@ -27,13 +27,8 @@ import numpy as np
 
 from lookahead.geometry.base import Path
 from lookahead.geometry.control_spline import ControlSpline
-from lookahead.geometry.polyline import (
-    DEFAULT_TOLERANCE,
-    MERGE_TOL,
-    check_tolerance,
-    point_tolerances,
-)
-from lookahead.geometry.streaming import MIN_STEP, PointStream, _Buffer
+from lookahead.geometry.polyline import DEFAULT_TOLERANCE, MERGE_TOL, TolerancePointStream
+from lookahead.geometry.streaming import MIN_STEP
 
 #: share of the tolerance taken by the simplification (the spline gets the rest): more
 #: gives longer chords (sagitta L^2 / (8 R) ~ share * tol) but the quintic inside them
@@ -44,16 +39,14 @@ SIMPLIFY_SHARE = 0.2
 MAX_RUN = 256
 
 
-class SmoothFit(PointStream):
+class SmoothFit(TolerancePointStream):
     """`smooth` fit of a point stream received in chunks; see the module docstring."""
 
     method = "smooth"
 
     def __init__(self, naxes: int, path_scale: np.ndarray,
                  tolerance: float = DEFAULT_TOLERANCE, min_step: float = MIN_STEP) -> None:
-        super().__init__(naxes, path_scale, min_step)
-        self.tolerance = check_tolerance(tolerance)
-        self._tol = _Buffer(())
+        super().__init__(naxes, path_scale, tolerance, min_step)
         self._inner = ControlSpline(naxes, self.path_scale)
         self._anchor = -1  # kept-point index of the last simplified vertex
         self._done = 0
@@ -62,15 +55,6 @@ class SmoothFit(PointStream):
     def kinds(self) -> list[str]:
         """Per decided simplified vertex: "plain", "group" or "stop" (`ControlSpline`)."""
         return self._inner.kinds
-
-    def extend(self, points: np.ndarray, tolerance: float | np.ndarray | None = None) -> None:
-        """Append a chunk (n, naxes); `tolerance` as `LinearFit.extend`."""
-        tol = point_tolerances(len(np.asarray(points)), tolerance, self.tolerance)
-        rows = self._take(points)
-        if rows is None:
-            return
-        self._tol.append(tol[rows])
-        self._finalize()
 
     def _finalize(self) -> None:
         n = self._u.size
