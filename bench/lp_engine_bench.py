@@ -10,6 +10,9 @@ solver: fallbacks (windows the LP could not make; the heuristic made them), repl
     .venv/bin/python bench/lp_engine_bench.py [--subset fast|all] [--solver highs osqp]
         [--pattern GLOB] [--skip-long] [--ab]
 
+--solver takes the `lp.solve` backends: highs (persistent warm-started highspy model),
+highs-milp (cold `scipy.optimize.milp` per solve: the A/B partner of highs), osqp.
+
 --ab: each path twice in turn in one process, "before" (the round-2 fixes of issue 13
 switched off: no secant accelerations at reversing intervals, no early end of hopeless
 repair loops, no rest nodes at near-reversals) then "after", so the two compute times

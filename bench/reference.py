@@ -56,6 +56,12 @@ RHO = (0.2, 0.05, 0.01)
 GRIDS = 1
 #: the first grid's density along the v+a plan, per node_dt (the jerk plan is slower)
 VA_DENSITY = 2.0
+#: most nodes per stretch. The rows see the plan only at its nodes: where consecutive
+#: nodes are more than dt apart in time, the sampled jerk between them is the quintic
+#: reconstruction's, not the LP's (w-issue-tube9570, one 40 s stretch: 30k nodes, 4 ms
+#: apart near rest, sampled jerk 2.5 jmax even after 6 shrinks; 100k: 0 violations).
+#: Trades memory and solve time (linear in nodes) for a checkable plan on long stretches.
+MAX_NODES = 120_000
 #: largest relative change of the curvature per interval (h |x_sss| / |x_ss|); 0.1
 #: resolved the near-cusp inside a piece of c-corners-bspline-2d (its sampled jerk went
 #: from 1.41 to 1.01 jmax, which the first 3 % shrink absorbs)
@@ -411,7 +417,7 @@ def sample_positions(path: Path, stretches: list[Stretch], dt: float,
 
 def plan_reference(path: Path, limits: AxisLimits, dt: float,
                    check_limits: AxisLimits | None = None, feed_cap=None,
-                   node_dt: float | None = None, max_nodes: int = 30000, passes: int = 24,
+                   node_dt: float | None = None, max_nodes: int = MAX_NODES, passes: int = 24,
                    tol: float = 1e-4, max_shrinks: int = 6) -> ReferenceResult:
     """Plan the whole of `path` to `limits` and check the stream at dt against
     `check_limits` (default: `limits`); shrink until it passes (see the module doc)."""
@@ -427,7 +433,7 @@ def plan_reference(path: Path, limits: AxisLimits, dt: float,
     for attempt in range(max_shrinks + 1):
         lim = AxisLimits(limits.vmax, limits.amax * f, limits.jmax * f)
         stretches, history, grid = [], [], node_dt
-        per = max(2000, max_nodes // max(len(spans), 1))
+        per = max_nodes
         converged = True
         for a, b in spans:
             st, hist, g = plan_stretch(path, a, b, lim, node_dt, per, passes, tol, feed_cap)

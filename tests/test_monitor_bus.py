@@ -108,10 +108,13 @@ def test_monitor_follows_a_real_time_job_and_its_commands(tmp_path):
         assert not none["ok"] and "no service answered" in none["error"]
         done = None
         deadline = time.monotonic() + 60
+        left = []  # (elapsed, time left) the page shows once the plan reaches the end
         while done is None:
             s = get(url, "/api/state?machine=winder")
             if s["progress"]["fraction"] is not None and s["job"] == "watched":
                 fractions.append(s["progress"]["fraction"])
+            if s["progress"]["remaining_s"] is not None and s["job"] == "watched":
+                left.append((s["progress"]["elapsed_s"], s["progress"]["remaining_s"]))
             if s["report"] is not None and s["progress"]["duration_s"] is not None:
                 done = s
             assert time.monotonic() < deadline, s["status"]
@@ -129,6 +132,12 @@ def test_monitor_follows_a_real_time_job_and_its_commands(tmp_path):
     assert done["report"]["job"] == report["job"] == "watched"
     assert done["gaps"] == 0 and done["samples"] == report["samples"]
     assert done["progress"]["duration_s"] == pytest.approx(report["duration_s"], abs=0.002)
+    # the time left shown after the resume (no command since): exact, from the plan
+    assert len(left) >= 3, left
+    dt = machines[0]["dt"]
+    for elapsed, remaining in left:
+        assert elapsed + remaining == pytest.approx(done["progress"]["duration_s"], abs=dt)
+    assert all(b[1] <= a[1] for a, b in itertools.pairwise(left))
     for kind in ("v", "a", "j"):
         assert done["peak"][kind] == pytest.approx(report["peak_fraction"][kind], rel=1e-9)
     commands = [(c["verb"], c["ok"]) for c in done["commands"]]

@@ -11,10 +11,11 @@ import pytest
 
 from lookahead.checker import LimitChecker
 from lookahead.limits import AxisLimits
-from lookahead.protocol import Event, Segment, SetpointBatch
+from lookahead.protocol import Event, Segment, SetpointBatch, Status
 from lookahead_clients.monitor.chart import ChartBinner
 from lookahead_clients.monitor.machine_view import MachineSpec, MachineView
 from lookahead_clients.monitor.path_view import ProgrammedPath, segment_points
+from lookahead_clients.status import describe
 
 DT = 0.001
 VMAX, AMAX, JMAX = (500.0, 720.0), (2000.0, 3000.0), (20000.0, 30000.0)
@@ -141,3 +142,31 @@ def test_a_view_reports_progress_and_what_it_is_based_on():
     snap = view.snapshot()
     assert snap["job"] == "b" and snap["progress"]["fraction"] is None
     assert "did not see" in snap["progress"]["basis"]
+
+
+def test_time_left_is_shown_only_once_the_plan_reaches_the_end():
+    view = MachineView(spec())
+    view.on_segment(points_segment("t", 0, np.array([[0.0, 0.0], [100.0, 50.0]]), True))
+    view.on_status(Status("running", "t", 500, 1, 2.5, 1.0, "lp", 1.0, None))
+    progress = view.snapshot()["progress"]
+    assert progress["remaining_s"] is None and progress["planned_ahead_s"] == 2.5
+    assert progress["elapsed_s"] == pytest.approx(0.5)
+    view.on_status(Status("running", "t", 1500, 1, 1.25, 1.0, "lp", 1.0, None,
+                          plan_complete=True, remaining_s=1.25))
+    progress = view.snapshot()["progress"]
+    assert progress["remaining_s"] == 1.25 and progress["elapsed_s"] == pytest.approx(1.5)
+    # another job's status says nothing about this one
+    view.on_status(Status("running", "other", 10, 0, 1.0, 1.0, "lp", 1.0, None,
+                          plan_complete=True, remaining_s=1.0))
+    assert view.snapshot()["progress"]["remaining_s"] is None
+
+
+def test_lookahead_status_prints_the_time_left():
+    running = Status("running", "t", 1500, 1, 1.25, 1.0, "lp", 1.0, None,
+                     plan_complete=True, remaining_s=1.2504)
+    line = describe("lookahead/winder", running)
+    assert line.startswith("lookahead/winder: state=running job=t k=1500 ")
+    assert line.endswith(" horizon_s=1.250 override=1.0 planner=lp plan_ms=1.00 error=None "
+                         "plan_complete=True remaining_s=1.250")
+    ahead = Status("running", "t", 10, 1, 2.0, 1.0, "lp", 1.0, None)
+    assert describe("ns", ahead).endswith(" plan_complete=False remaining_s=None")

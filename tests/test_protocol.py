@@ -214,6 +214,23 @@ def test_status_event_reply_command_round_trip() -> None:
     assert Command.decode("hold", b"") == Command("hold")
 
 
+def test_status_time_left_round_trips_and_older_statuses_decode() -> None:
+    done = Status("running", "job1", 1234, 0, 0.75, 1.0, "lp", 2.0, None,
+                  plan_complete=True, remaining_s=0.75)
+    assert Status.decode(done.encode()) == done
+    # a status from before the fields existed: the end is not known to be planned
+    old = msgpack.unpackb(done.encode())
+    del old["plan_complete"], old["remaining_s"]
+    decoded = Status.decode(msgpack.packb(old))
+    assert decoded.plan_complete is False and decoded.remaining_s is None
+    assert decoded.horizon_s == 0.75 and decoded.k == 1234
+    for name, value in (("remaining_s", -1.0), ("remaining_s", "soon"),
+                        ("plan_complete", 1)):
+        with pytest.raises(ProtocolError) as info:
+            Status.decode(msgpack.packb({**old, name: value}))
+        assert info.value.field == name
+
+
 @pytest.mark.parametrize("value", [0.0, -1.0, 1.51, float("nan")])
 def test_override_out_of_range(value: float) -> None:
     with pytest.raises(ProtocolError) as info:

@@ -48,16 +48,24 @@ def run(args: argparse.Namespace) -> int:
             print(f"status: no planner answered on {key(cfg.ns, 'status')} within "
                   f"{args.timeout} s", file=sys.stderr)
             return 1
-        print(f"{cfg.ns}: state={status.state} job={status.job} k={status.k} "
-              f"queued={status.queued} horizon_s={status.horizon_s:.3f} "
-              f"override={status.override} planner={status.planner} "
-              f"plan_ms={status.plan_ms:.2f} error={status.error}")
+        print(describe(cfg.ns, status))
         if missing:
             print(f"status: no liveliness token for {', '.join(missing)}", file=sys.stderr)
             return 1
         return 0
     finally:
         session.close()
+
+
+def describe(ns: str, status) -> str:
+    """The line printed for a `lookahead.protocol.Status`: its fields as name=value; times in
+    s, `remaining_s` None while the plan does not reach the job's end."""
+    remaining = "None" if status.remaining_s is None else f"{status.remaining_s:.3f}"
+    return (f"{ns}: state={status.state} job={status.job} k={status.k} "
+            f"queued={status.queued} horizon_s={status.horizon_s:.3f} "
+            f"override={status.override} planner={status.planner} "
+            f"plan_ms={status.plan_ms:.2f} error={status.error} "
+            f"plan_complete={status.plan_complete} remaining_s={remaining}")
 
 
 def _alive(session, token_key: str, deadline: float) -> bool:

@@ -424,6 +424,14 @@ class Status:
     accepting: bool = True
     #: window plans the configured planner could not make (the stop planner made them)
     fallbacks: int = 0
+    #: ours (absent in older messages): true when the committed plan runs to the end of
+    #: the job (all segments in, the last window planned to the final stop, or the stop
+    #: of an abort/fault); then `remaining_s` is the exact motion time (s) from sample `k`
+    #: to the job's last sample at the current override, else None (`horizon_s` is then
+    #: only the plan to its next stop). Holds are not counted; an override or hold command
+    #: voids it until the plan is remade (`lookahead.stream.engine`, "Time left").
+    plan_complete: bool = False
+    remaining_s: float | None = None
 
     def encode(self) -> bytes:
         return _pack({"v": VERSION, "state": self.state, "job": self.job, "k": self.k,
@@ -432,7 +440,8 @@ class Status:
                       "plan_ms": self.plan_ms, "error": self.error,
                       "receiving": self.receiving, "next_seq": self.next_seq,
                       "buffered_points": self.buffered_points, "accepting": self.accepting,
-                      "fallbacks": self.fallbacks})
+                      "fallbacks": self.fallbacks, "plan_complete": self.plan_complete,
+                      "remaining_s": self.remaining_s})
 
     @staticmethod
     def decode(payload: bytes) -> Status:
@@ -449,6 +458,11 @@ class Status:
         receiving = None if receiving is None else _job(receiving, "receiving")
         next_seq = msg.get("next_seq")
         next_seq = None if next_seq is None else _int(next_seq, "next_seq", lo=0)
+        # time-left fields: absent in older messages (plan_complete false, remaining nil)
+        remaining = msg.get("remaining_s")
+        remaining = None if remaining is None else _float(remaining, "remaining_s")
+        if remaining is not None and remaining < 0:
+            raise ProtocolError("remaining_s", f"must be >= 0 or nil, got {remaining!r}")
         return Status(state, job, _int(_require(msg, "k"), "k"),
                       _int(_require(msg, "queued"), "queued", lo=0),
                       _float(_require(msg, "horizon_s"), "horizon_s"),
@@ -458,7 +472,8 @@ class Status:
                       receiving, next_seq,
                       _int(msg.get("buffered_points", 0), "buffered_points", lo=0),
                       _bool(msg.get("accepting", True), "accepting"),
-                      _int(msg.get("fallbacks", 0), "fallbacks", lo=0))
+                      _int(msg.get("fallbacks", 0), "fallbacks", lo=0),
+                      _bool(msg.get("plan_complete", False), "plan_complete"), remaining)
 
 
 @dataclass(frozen=True)

@@ -9,8 +9,10 @@ the wall clock, `lead_s` ahead of due time; fast: as fast as possible), events a
 What a client sees is consistent with the setpoints already published: in real-time mode
 the engine produces up to MAX_AHEAD_S ahead of publication, so events about motion
 (`job_started`, `starved`, `job_finished`) wait until the batch holding their sample k is
-published, and the status reports the last published sample (its `k`, `horizon_s` and a
-`running` job whose last batches are still buffered). The status answer (queryable) is
+published, and the status reports the last published sample (its `k`, `horizon_s`,
+`remaining_s` and a `running` job whose last batches are still buffered: the samples
+produced but not yet published are added to the engine's times, which start at the last
+produced sample). The status answer (queryable) is
 refreshed whenever events are released, after commands, after segments are taken in and
 at status_hz.
 """
@@ -506,11 +508,18 @@ class PlannerService:
         if not out:
             return status
         head = out[0]
-        ahead = sum(b.n for b in out if b.job == head.job) * self.config.machine.dt
+        mine = [b for b in out if b.job == head.job]
+        ahead = sum(b.n for b in mine) * self.config.machine.dt
         if status.job == head.job and status.state != "idle":
-            return replace(status, k=max(head.k0 - 1, 0), horizon_s=status.horizon_s + ahead)
+            remaining = None if status.remaining_s is None else status.remaining_s + ahead
+            return replace(status, k=max(head.k0 - 1, 0), horizon_s=status.horizon_s + ahead,
+                           remaining_s=remaining)
+        # the engine is done with the head job: what is unpublished of it is all there is
+        # if its final batch is among it (else it was dropped without one, after a failure)
+        complete = mine[-1].final
         return replace(status, state="running", job=head.job, k=max(head.k0 - 1, 0),
-                       horizon_s=ahead, error=None)
+                       horizon_s=ahead, error=None, plan_complete=complete,
+                       remaining_s=ahead if complete else None)
 
 
 def peek_ids(payload: bytes) -> tuple[str | None, int | None]:

@@ -9,6 +9,9 @@ Progress and time (what they are based on, shown on the page):
 - `elapsed_s`: k * dt of the status' last published sample (job time);
 - `planned_ahead_s`: the status' `horizon_s`, the service's committed plan from that sample
   to where it comes to rest (the end of the path once the last window reaches it);
+- `remaining_s`: the status' `remaining_s` while its `plan_complete` is true (the plan
+  reaches the job's end: the exact planned motion time left at the current override), else
+  None (the page then shows `planned_ahead_s` and that the end is not planned yet);
 - `duration_s`: the job's duration from its `job_finished` event, once it has ended.
 """
 
@@ -210,6 +213,8 @@ class MachineView:
         out: dict = {
             "elapsed_s": status.get("k", 0) * self.spec.dt if same else None,
             "planned_ahead_s": status.get("horizon_s") if same else None,
+            "remaining_s": (status.get("remaining_s") if same and status.get("plan_complete")
+                            else None),
             "duration_s": None, "fraction": None, "basis": None,
         }
         if job is None:

@@ -24,7 +24,7 @@ API (stable; the replay client depends on it):
   waiting, bounded by START_WAIT_S), and in fast mode (realtime=False) while starved or
   holding at rest. Real-time mode keeps emitting rest samples then.
 - `command(Command) -> CommandReply` (listed in the next batch's `commands` field),
-  `status() -> Status`.
+  `status() -> Status` (its `plan_complete` and `remaining_s`: "Time left" below).
 - `drain_events() -> list[Event]`: every event since the last call (including those that
   `submit`/`expire_gaps`/`reject` returned): publish events from here only.
 
@@ -44,6 +44,20 @@ about to start, its first point is compared with the machine position (per axis,
 START_TOL axis units); a job that starts elsewhere is rejected (`rejected` with seq 0 and
 `job_finished` with `aborted: true`, nothing moves), since the service has no move of its
 own to get there. The first job after start-up has no known position and is accepted.
+
+Time left (status `horizon_s`, `plan_complete`, `remaining_s`): `horizon_s` is the motion
+time of the committed plan from the last produced sample to where it comes to rest.
+`plan_complete` is true when that rest is the end of the job: every segment is in (the
+`last` one included), the plan ends at rest at the end of the path and no command waits to
+change it; or the plan in force is the stop of an abort or a fault, which ends the job. Then
+`remaining_s` = `horizon_s` is exact: the job's last sample comes `remaining_s` after the
+last produced one (`job_finished`'s `duration_s` = k*dt + `remaining_s`, in samples). Else
+`plan_complete` is false and `remaining_s` None (the plan stops short of the end, or is
+about to change). Overrides: the remaining time is the plan's at the override in force; a
+new override voids it (false/None) until the next batch has replanned at the new value
+(through a slowdown first when the new limits cannot take over mid-motion, false/None
+meanwhile). Holds: false/None from the hold command until the resume has replanned; the
+remaining time counts motion only, never time spent holding.
 
 Faults:
 - A seq gap that outlasts gap_timeout_s (counted from the arrival of the first segment
@@ -628,9 +642,20 @@ class Engine:
         queued += sum(j.geo.nsegments + j.order.waiting for j in self._jobs.values()
                       if j is not job)
         horizon = job.plan.remaining_s(k_last, self.dt) if job.plan is not None else 0.0
+        complete = self._plan_complete(job)
         self._buffered = self._count_buffered(job, s_now)
         return Status(state, job.id, k_last, queued, horizon, self.override, name,
-                      self.plan_ms, self.fault or job.fault, **self._flow())
+                      self.plan_ms, self.fault or job.fault, **self._flow(),
+                      plan_complete=complete, remaining_s=horizon if complete else None)
+
+    def _plan_complete(self, job: _Job) -> bool:
+        """The committed plan runs to the end of the job and no command waits to change it
+        (module docstring, "Time left")."""
+        if job.plan is None or job.stop_request is not None:
+            return False
+        if job.stop in ("abort", "fault"):
+            return True
+        return not job.override_pending and not job.force_replan and self._ending(job)
 
     def _flow(self) -> dict:
         """The flow-control fields of the status (PROTOCOL.md "Status")."""

@@ -124,9 +124,11 @@ function drawProgress(m, p, backlog) {
   if (p.elapsed_s !== null) parts.push(`elapsed ${fmt(p.elapsed_s, 1)} s (job time k·dt)`);
   if (p.duration_s !== null && p.duration_s !== undefined)
     parts.push(`job finished: duration ${fmt(p.duration_s, 2)} s`);
+  else if (p.remaining_s !== null && p.remaining_s !== undefined)
+    parts.push(`time left ${fmt(p.remaining_s, 2)} s (the service's plan reaches the end ` +
+      `of the job; motion time at the current override, holds not counted)`);
   else if (p.planned_ahead_s !== null)
-    parts.push(`planned ahead ${fmt(p.planned_ahead_s, 2)} s (the service's committed plan ` +
-      `to its next stop, which is the end of the path only in the last window)`);
+    parts.push(`planned ahead ${fmt(p.planned_ahead_s, 2)} s (end not planned yet)`);
   if (p.basis) parts.push("progress: " + p.basis);
   if (backlog > 100) parts.push(`the monitor is catching up: ${backlog} messages queued on its side`);
   el(n, ".ptext").textContent = parts.join(" · ");

@@ -37,6 +37,7 @@ from lookahead.planning.lp.grid import (
     feature_steps,
     near_reversals,
     refine_grid,
+    split_near,
 )
 from lookahead.planning.lp.profile import (
     grid_time,
@@ -193,6 +194,7 @@ class LPPlanner:
         self.seam_jerk_change = seam_jerk_change
         self._last: LastPlan | None = None
         self._corners: tuple[Path, float, np.ndarray] | None = None
+        self._split: np.ndarray | None = None  # `_plan_cold`: split the grid near these s
         self.free_start_nodes = free_start_nodes
         self.envelope_margin = envelope_margin
         self.zone_pad = zone_pad
@@ -236,10 +238,12 @@ class LPPlanner:
 
     def _plan_cold(self, request: PlanRequest, fixed_head: np.ndarray | None) -> PlanResult:
         """A plan from scratch; if it fails, once more with the jerk margin times
-        RETRY_JERK_MARGIN; if one from rest still fails on a short stretch, again on grids
-        2x, 4x, ... finer while they have at most `MAX_REFINED_NODES` intervals: a stretch
-        of a few grid steps (short paths) is resolved by too few nodes for the jerk rows between
-        its start and stop S-curves (measured: 35-100 mm fits and B-spline pieces)."""
+        RETRY_JERK_MARGIN; if its repairs still fail, once more on a grid split 4x where
+        they failed (`lp.grid.split_near`, not under a fixed head); if one from rest still
+        fails on a short stretch, again on grids 2x, 4x, ... finer while they have at most
+        `MAX_REFINED_NODES` intervals: a stretch of a few grid steps (short paths) is
+        resolved by too few nodes for the jerk rows between its start and stop S-curves
+        (measured: 35-100 mm fits and B-spline pieces)."""
         length = float(request.s_end - request.start.s)
         h = self.grid_step or default_grid_step(request.path, request.limits)
         try:
@@ -249,7 +253,14 @@ class LPPlanner:
         margins = self.margins
         try:  # repairs that did not converge: once more with a smaller jerk margin
             self.margins = (margins[0], margins[1], margins[2] * RETRY_JERK_MARGIN)
-            return self._plan(request, fixed_head, None)
+            try:
+                return self._plan(request, fixed_head, None)
+            except PlanningError as exc:
+                places = getattr(exc, "places", None)
+                if fixed_head is None and places is not None:
+                    return self._plan_split(request, np.concatenate(
+                        [places, getattr(first_error, "places", np.empty(0))]))
+                raise
         except PlanningError:
             if (fixed_head is not None or request.start.v > REST
                     or length / (h / 2.0) > MAX_REFINED_NODES):
@@ -264,6 +275,14 @@ class LPPlanner:
                 finer /= 2.0
                 if length / finer > MAX_REFINED_NODES:
                     raise
+
+    def _plan_split(self, request: PlanRequest, places: np.ndarray) -> PlanResult:
+        """A plan from scratch on the grid split near `places` (s, path units)."""
+        self._split = places
+        try:
+            return self._plan(request, None, None)
+        finally:
+            self._split = None
 
     def _plan_seam(self, request: PlanRequest, seam: Seam) -> PlanResult:
         return self._plan(request, None, seam)
@@ -321,6 +340,7 @@ class LPPlanner:
                                q_star_head=q_star_head)
         repairs = 0
         worst = float("nan")
+        trouble: list[float] = []  # where each repair round's worst excess was (s)
         while True:
             full = self._profile(request, plan, a_start)
             profile = slice_profile(full, t_cut) if t_cut > 0.0 else full
@@ -337,9 +357,12 @@ class LPPlanner:
             if repairs >= self.max_repairs or (repairs >= HOPELESS_AFTER
                                                and worst > HOPELESS_RATIO):
                 kind, s_bad = worst_place(ratios, full)
-                raise PlacedPlanningError(
+                exc = PlacedPlanningError(
                     f"lp: sampled profile still exceeds the {kind} limit by "
                     f"{100 * (worst - 1):.1f} % after {repairs} repairs", s_bad)
+                exc.places = np.array([*trouble, s_bad])  # type: ignore[attr-defined]
+                raise exc
+            trouble.append(worst_place(ratios, full)[1])
             self._tighten(tight, ratios, full, s, request.dt)
             plan = self.solve_grid(request, geo, tight, stop_idx, head, start_q=plan.q,
                                    passes=1, start_envelope=seam is None)
@@ -438,7 +461,10 @@ class LPPlanner:
         corners = self.corners(request.path, h)
         s, stop_idx = build_grid(s0, s1, h, request.start.v <= REST, request.v_end <= REST,
                                  corners)
-        return self.refine(request.path, s, stop_idx, h)
+        s, stop_idx = self.refine(request.path, s, stop_idx, h)
+        if self._split is not None:
+            s, stop_idx = split_near(s, stop_idx, self._split)
+        return s, stop_idx
 
     def refine(self, path: Path, s: np.ndarray, stop_idx: np.ndarray, h: float,
                first: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -580,7 +606,8 @@ class LPPlanner:
 
     def _solve(self, plan: GridPlan, weight, q_lo, q_hi, rows: list[Rows], n: int,
                record: bool) -> np.ndarray:
-        lp = ScaledLP.build(weight, q_lo, q_hi, free_rows(Rows.stack(rows, n), q_lo >= q_hi))
+        lp = ScaledLP.build(weight, q_lo, q_hi, free_rows(Rows.stack(rows, n), q_lo >= q_hi),
+                            nodes=plan.s)
         t0 = time.perf_counter()
         out = self.backend.solve(lp)
         plan.solver_ms.append(1e3 * (time.perf_counter() - t0))

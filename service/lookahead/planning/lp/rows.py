@@ -29,11 +29,23 @@ def s_derivatives(d: np.ndarray, path_scale: np.ndarray) -> tuple[np.ndarray, ..
     return d1, d2, d3, sigma
 
 
+def midpoint_u(s: np.ndarray, u: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """u at the interval midpoints (s_i + s_i+1) / 2: the cubic Hermite interpolant of the
+    nodes' (u, du/ds = 1/sigma), as `sampled_check.analytic_ratios` locates u between
+    nodes (the derivatives there within ~0.3 % on 1-3 mm intervals at the issue-13
+    Fourier path's near-cusp; an arc-length inversion costs far more)."""
+    h = np.diff(s)
+    du = 1.0 / sigma
+    return 0.5 * (u[:-1] + u[1:]) + 0.125 * h * (du[:-1] - du[1:])
+
+
 @dataclass(frozen=True)
 class GridGeometry:
     """Path derivatives w.r.t. s at the grid nodes: d1, d2, d3 have shape (N+1, naxes);
     u is the native parameter and sigma = ds/du at the nodes (for a cheap u(s) between
-    them, `sampled_check.analytic_ratios`)."""
+    them, `sampled_check.analytic_ratios`). mid: (x_s, x_ss, x_sss) at the N interval
+    midpoints, each (N, naxes) (rows of NaN where unknown: a seam's joining interval),
+    for the midpoint jerk rows (`midpoint_jerk_rows`); None: no such rows."""
 
     s: np.ndarray
     d1: np.ndarray
@@ -41,13 +53,19 @@ class GridGeometry:
     d3: np.ndarray
     u: np.ndarray | None = None
     sigma: np.ndarray | None = None
+    mid: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     @classmethod
-    def sample(cls, path: Path, s: np.ndarray) -> GridGeometry:
+    def sample(cls, path: Path, s: np.ndarray, midpoints: bool = True) -> GridGeometry:
         s = np.asarray(s, dtype=float)
         u = path.u_of_s(s)
         d1, d2, d3, sigma = s_derivatives(path.eval_u(u, order=3), path.path_scale)
-        return cls(s, d1, d2, d3, u, sigma)
+        mid = None
+        if midpoints and s.size >= 2:
+            m1, m2, m3, _ = s_derivatives(path.eval_u(midpoint_u(s, u, sigma), order=3),
+                                          path.path_scale)
+            mid = (m1, m2, m3)
+        return cls(s, d1, d2, d3, u, sigma, mid)
 
     @property
     def n_nodes(self) -> int:
@@ -55,9 +73,14 @@ class GridGeometry:
 
     def take(self, nodes: slice) -> GridGeometry:
         """The geometry of a run of nodes (a replan reuses its previous grid's)."""
+        mid = None
+        if self.mid is not None:
+            start, stop, step = nodes.indices(self.n_nodes)
+            if step == 1:
+                mid = tuple(m[start:max(stop - 1, start)] for m in self.mid)
         return GridGeometry(self.s[nodes], self.d1[nodes], self.d2[nodes], self.d3[nodes],
                             None if self.u is None else self.u[nodes],
-                            None if self.sigma is None else self.sigma[nodes])
+                            None if self.sigma is None else self.sigma[nodes], mid)
 
     @staticmethod
     def join(head: GridGeometry, tail: GridGeometry) -> GridGeometry:
@@ -65,9 +88,14 @@ class GridGeometry:
         def cat(a, b):
             return None if a is None or b is None else np.concatenate([a, b])
 
+        mid = None
+        if head.mid is not None and tail.mid is not None:
+            gap = np.full((1, head.d1.shape[1]), np.nan)  # the joining interval: unknown
+            mid = tuple(np.concatenate([a, gap, b]) for a, b in zip(head.mid, tail.mid,
+                                                                       strict=True))
         return GridGeometry(np.concatenate([head.s, tail.s]), cat(head.d1, tail.d1),
                             cat(head.d2, tail.d2), cat(head.d3, tail.d3), cat(head.u, tail.u),
-                            cat(head.sigma, tail.sigma))
+                            cat(head.sigma, tail.sigma), mid)
 
 
 @dataclass
@@ -239,6 +267,63 @@ def jerk_rows(
             c = sign * root * coef
             c[:, 1] += J / (2.0 * qs[nodes])
             parts.append(Rows(_tridiagonal(c, nodes, n), np.full(nodes.size, -np.inf), 1.5 * J))
+    parts.append(midpoint_jerk_rows(geo, jmax, scale, qs, q_floor))
+    return Rows.stack(parts, n)
+
+
+def midpoint_operators(geo: GridGeometry) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                   np.ndarray]:
+    """q, q' and q'' at the midpoints of the intervals j = 1 .. N-3 (both ends interior
+    nodes) as rows on the nodes (j-1, j, j+1, j+2): the cubic Hermite interpolant of the
+    nodal q and their central slopes q' (`fd_weights`), which is what the quintic
+    reconstruction (`lp.profile`) follows between the nodes, to O(h^3).
+
+    Returns (Q, DQ, DDQ, j), each operator of shape (m, 4)."""
+    w1, _ = fd_weights(geo.s)
+    j = np.arange(1, geo.n_nodes - 2)
+    h = np.diff(geo.s)[j][:, None]
+    p0 = np.zeros((j.size, 4))
+    p1 = np.zeros((j.size, 4))
+    p0[:, :3] = w1[j - 1]
+    p1[:, 1:] = w1[j]
+    e0 = np.zeros(4)
+    e0[1] = 1.0
+    e1 = np.zeros(4)
+    e1[2] = 1.0
+    Q = 0.5 * (e0 + e1)[None, :] + 0.125 * h * (p0 - p1)
+    DQ = 1.5 * (e1 - e0)[None, :] / h - 0.25 * (p0 + p1)
+    DDQ = (p1 - p0) / h
+    return Q, DQ, DDQ, j
+
+
+def midpoint_jerk_rows(geo: GridGeometry, jmax: np.ndarray, scale: np.ndarray,
+                       qs: np.ndarray, q_floor: float) -> Rows:
+    """The tangent jerk rows of `jerk_rows` at the interval midpoints (issue 13): the
+    nodal rows alone let the LP cancel a large geometric jerk x_sss v^3 with the path
+    jerk x_s j exactly at the nodes where x_sss changes sign between them (a sharp bend
+    one or two node spacings wide, the butterfly NURBS at s = 172.9: nodal jerk 0.52 J,
+    the reconstructed profile 3.7 J between the nodes, which no tightening of the nodal
+    rows repaired). q = 0 satisfies these rows as well (feasibility is unchanged).
+    qs: the linearization point at the nodes (floored); at a midpoint, the mean of its
+    nodes'. J is the larger of the two nodes' scale times jmax (the smaller made 10 of
+    test_lp_planner's 60 moving starts infeasible: `_relieve_start` relieves node 1 only)."""
+    n = geo.n_nodes
+    if geo.mid is None or n < 4:
+        return Rows(sp.csr_matrix((0, n)), np.empty(0), np.empty(0))
+    Q, DQ, DDQ, j = midpoint_operators(geo)
+    m1, m2, m3 = (m[j] for m in geo.mid)
+    known = np.all(np.isfinite(m1) & np.isfinite(m2) & np.isfinite(m3), axis=1)
+    qm = np.maximum(0.5 * (qs[j] + qs[j + 1]), q_floor)
+    root = np.sqrt(qm)[:, None]
+    sj = np.maximum(scale[j], scale[j + 1])  # a relieved start node relieves its interval
+    parts = []
+    for k in range(geo.d1.shape[1]):
+        L = m3[:, k, None] * Q + 1.5 * m2[:, k, None] * DQ + 0.5 * m1[:, k, None] * DDQ
+        J = jmax[k] * sj
+        for sign in (1.0, -1.0):
+            c = sign * root * L + (J / (2.0 * qm))[:, None] * Q
+            parts.append(Rows(banded(c[known], j[known] - 1, n),
+                              np.full(int(known.sum()), -np.inf), 1.5 * J[known]))
     return Rows.stack(parts, n)
 
 
@@ -294,3 +379,4 @@ def jerk_change_rows(
         bound = np.full(int(keep.sum()), kappa * jmax[k])
         parts.append(Rows(diff, -bound, bound))
     return Rows.stack(parts, n)
+

@@ -1,0 +1,134 @@
+"""The LP backends' warm starts: the persistent HiGHS model answers a sequence of re-solves
+(other objective, other bounds, other matrix, an infeasible one in between) exactly as a
+cold solve does, and OSQP's warm start maps primal and dual values onto the rows and nodes
+that two windows share."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from lookahead.planning.lp.rows import Rows
+from lookahead.planning.lp.solve import (
+    HighsBackend,
+    MilpBackend,
+    OsqpBackend,
+    ScaledLP,
+    _match,
+    row_keys,
+)
+
+
+def feed_lp(n: int, seed: int, weight: np.ndarray | None = None,
+            floor: np.ndarray | None = None, step_scale: float = 1.0,
+            nodes: np.ndarray | None = None) -> ScaledLP:
+    """A feed-like LP: 0 <= q_i <= cap_i (q_0 = 0), |q_i+1 - q_i| <= step_i and a second
+    difference row, with caps and steps varying so that several rows bind."""
+    rng = np.random.default_rng(seed)
+    cap = rng.uniform(50.0, 100.0, n)
+    lower = np.zeros(n) if floor is None else floor.copy()
+    upper = cap.copy()
+    upper[0] = lower[0] = 0.0
+    d1 = sp.diags([-np.ones(n - 1), np.ones(n - 1)], [0, 1], shape=(n - 1, n))
+    d2 = sp.diags([np.ones(n - 2), -2.0 * np.ones(n - 2), np.ones(n - 2)], [0, 1, 2],
+                  shape=(n - 2, n))
+    step = step_scale * rng.uniform(5.0, 20.0, n - 1)
+    curv = np.full(n - 2, 6.0)
+    rows = Rows(sp.vstack([d1, d2]).tocsr(), np.concatenate([-step, -curv]),
+                np.concatenate([step, curv]))
+    return ScaledLP.build(np.ones(n) if weight is None else weight, lower, upper, rows,
+                          nodes=nodes)
+
+
+def objective(lp: ScaledLP, q: np.ndarray) -> float:
+    return float(lp.cost @ (q / lp.q_scale))
+
+
+def test_persistent_highs_matches_cold_solves_through_a_resolve_sequence():
+    n = 60
+    rng = np.random.default_rng(3)
+    base = feed_lp(n, 1)
+    sequence = [
+        base,
+        feed_lp(n, 1, weight=rng.uniform(0.1, 3.0, n)),          # objective only
+        feed_lp(n, 1, floor=np.full(n, 40.0)),                     # bounds: infeasible
+        feed_lp(n, 1, floor=np.r_[np.zeros(30), np.full(n - 30, 5.0)]),  # bounds only
+        feed_lp(n, 1, step_scale=0.5),                             # same shape, new matrix
+        feed_lp(n + 7, 2),                                         # another size
+        base,
+    ]
+    warm, cold = HighsBackend(), MilpBackend()
+    statuses = []
+    for lp in sequence:
+        a, b = warm.solve(lp), cold.solve(lp)
+        statuses.append(a.ok)
+        assert a.ok == b.ok, (a.status, b.status)
+        if a.ok:
+            assert objective(lp, a.q) == pytest.approx(objective(lp, b.q), rel=1e-7, abs=1e-9)
+            z = a.q / lp.q_scale
+            assert np.all(z >= lp.lower - 1e-9) and np.all(z <= lp.upper + 1e-9)
+            Az = lp.A @ z
+            assert np.all(Az <= lp.row_upper + 1e-7) and np.all(Az >= lp.row_lower - 1e-7)
+    assert statuses == [True, True, False, True, True, True, True]
+    assert warm.warm_solves >= 4  # the re-solves did start from the last basis
+
+
+def test_row_keys_name_the_same_rows_in_a_shifted_window():
+    """Two windows on the same nodes shifted by 10: every row of the overlap is found, at
+    the row of the other window that holds the same coefficients' pattern."""
+    s = np.linspace(0.0, 59.0, 60)
+    old = feed_lp(60, 1, nodes=s)
+    new = feed_lp(60, 1, nodes=s + 10.0)
+    k_old, k_new = row_keys(old.A, old.nodes), row_keys(new.A, new.nodes)
+    i_new, i_old = _match(k_new, k_old)
+    assert i_new.size > 0
+    # matched rows start on the same node s and have as many entries
+    first = lambda A, r: A.indices[A.indptr[r]]  # noqa: E731
+    for a, b in zip(i_new, i_old, strict=True):
+        assert new.nodes[first(new.A, a)] == old.nodes[first(old.A, b)]
+        assert new.A.indptr[a + 1] - new.A.indptr[a] == old.A.indptr[b + 1] - old.A.indptr[b]
+    # the overlap is nodes 10..59 of the old window: all its first-difference rows but the
+    # first 10 and all second-difference rows but the first 10 are shared
+    assert i_new.size == (59 - 10) + (58 - 10)
+
+
+def test_osqp_warm_start_from_the_solution_itself_converges_at_once():
+    """Re-solving the problem it has just solved, OSQP starts at its own primal and dual
+    solution: it must converge in far fewer iterations than the cold solve did."""
+    lp = feed_lp(40, 7, nodes=np.arange(40.0))
+    backend = OsqpBackend()
+    cold = backend.solve(lp)
+    again = backend.solve(lp)
+    assert cold.ok and again.ok, (cold.status, again.status)
+    assert again.iterations <= max(cold.iterations // 4, 25)
+    np.testing.assert_allclose(again.q, cold.q, atol=2e-3 * float(np.max(cold.q)))
+
+
+def test_osqp_answer_meets_the_rows_it_was_given():
+    """With shrink, OSQP solves each inequality that far inside its bound, so the accepted
+    answer meets the rows themselves to far better than `accept_violation`."""
+    lp = feed_lp(40, 5)
+    out = OsqpBackend(shrink=2e-3).solve(lp)
+    assert out.ok, out.status
+    z = out.q / lp.q_scale
+    Az = lp.A @ z
+    width = lp.row_upper - lp.row_lower
+    assert np.all(Az <= lp.row_upper + 1e-3 * width)
+    assert np.all(Az >= lp.row_lower - 1e-3 * width)
+
+
+def test_osqp_mapped_warm_start_across_windows_solves_the_new_window():
+    """map_windows: the second window (shifted by 10 nodes) starts from the first one's
+    primal and dual values on the 50 shared nodes and still reaches HiGHS's optimum."""
+    s = np.linspace(0.0, 59.0, 60)
+    backend = OsqpBackend(map_windows=True)
+    assert backend.solve(feed_lp(60, 1, nodes=s)).ok
+    second = feed_lp(60, 1, nodes=s + 10.0)
+    out = backend.solve(second)
+    assert out.ok, out.status
+    best = HighsBackend().solve(second)
+    # the same objective (the `shrink` margin moves single nodes by a few %)
+    assert objective(second, out.q) == pytest.approx(objective(second, best.q), rel=3e-3)
+    cold = OsqpBackend().solve(second)
+    assert objective(second, out.q) == pytest.approx(objective(second, cold.q), rel=1e-4)
