@@ -5,6 +5,8 @@ that two windows share."""
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -16,6 +18,7 @@ from lookahead.planning.lp.solve import (
     OsqpBackend,
     ScaledLP,
     _match,
+    make_backend,
     row_keys,
 )
 
@@ -46,6 +49,7 @@ def objective(lp: ScaledLP, q: np.ndarray) -> float:
 
 
 def test_persistent_highs_matches_cold_solves_through_a_resolve_sequence():
+    pytest.importorskip("highspy", reason="highspy is in the bench extra only")
     n = 60
     rng = np.random.default_rng(3)
     base = feed_lp(n, 1)
@@ -121,6 +125,7 @@ def test_osqp_answer_meets_the_rows_it_was_given():
 def test_osqp_mapped_warm_start_across_windows_solves_the_new_window():
     """map_windows: the second window (shifted by 10 nodes) starts from the first one's
     primal and dual values on the 50 shared nodes and still reaches HiGHS's optimum."""
+    pytest.importorskip("highspy", reason="highspy is in the bench extra only")
     s = np.linspace(0.0, 59.0, 60)
     backend = OsqpBackend(map_windows=True)
     assert backend.solve(feed_lp(60, 1, nodes=s)).ok
@@ -132,3 +137,10 @@ def test_osqp_mapped_warm_start_across_windows_solves_the_new_window():
     assert objective(second, out.q) == pytest.approx(objective(second, best.q), rel=3e-3)
     cold = OsqpBackend().solve(second)
     assert objective(second, out.q) == pytest.approx(objective(second, cold.q), rel=1e-4)
+
+
+def test_highs_without_highspy_is_scipys_milp(monkeypatch):
+    """highspy is not a runtime dependency: without it "highs" solves with scipy's HiGHS."""
+    monkeypatch.setitem(sys.modules, "highspy", None)  # import raises ImportError
+    assert isinstance(make_backend("highs"), MilpBackend)
+    assert isinstance(make_backend("highs-milp"), MilpBackend)

@@ -143,8 +143,8 @@ def worst_place(ratios: SampledRatios, profile: FeedProfile) -> tuple[str, float
 
 
 class LPPlanner:
-    """Planner "lp". solver: "highs" (default: scipy's HiGHS, the faster one measured) or
-    "osqp".
+    """Planner "lp". solver: "highs" (default, the faster one measured: HiGHS kept warm
+    between re-solves when `highspy` is installed, else scipy's), "highs-milp" or "osqp".
 
     grid_step: node spacing in path units (None: `default_grid_step`). max_passes: jerk
     re-linearizations. max_repairs: check/tighten rounds (each re-solves one jerk pass).
