@@ -16,15 +16,16 @@ import pytest
 from lookahead.bus import open_client_session
 from lookahead.config import load_config
 from lookahead.protocol import Event, Status, key
-from lookahead.service import FAST_BURST
 from test_clients_bus import bus_env, lookahead, stop, wait_alive, wait_subscribed
 from test_monitor_bus import poll, start_monitor
 
 pytestmark = [pytest.mark.bus, pytest.mark.filterwarnings("ignore::ResourceWarning")]
 
-#: statuses per second (s of wall time) asked of the service: in fast mode one goes out
-#: per burst of FAST_BURST batches, so the last planned window gets several
-STATUS_HZ = "200"
+#: statuses per second (s of wall time) asked of the service: in fast mode at most one
+#: goes out per burst of FAST_BURST batches (0.5 s of motion), and only once 1/STATUS_HZ
+#: has passed: high enough that a burst (several ms) always outlasts it, so the planned
+#: end (several bursts before the job's end) is seen in several statuses on any machine
+STATUS_HZ = "1000"
 
 
 class Listener:
@@ -33,7 +34,6 @@ class Listener:
     def __init__(self, env: dict[str, str]) -> None:
         cfg = load_config(environ=env)
         self.dt = cfg.machine.dt
-        self.burst_s = FAST_BURST * cfg.service.batch * cfg.machine.dt
         self.session = open_client_session(cfg.zenoh)
         self.lock = threading.Lock()
         self.seen: list[Status | Event] = []
@@ -111,8 +111,10 @@ def test_time_left_counts_down_to_the_end_of_a_fast_job():
     rem = [m.remaining_s for m in complete]
     assert all(b < a for a, b in itertools.pairwise(rem)), rem
     assert rem[0] > 1.0
-    # ... to within one burst of fast mode's publication (a status per burst) of the end
-    assert rem[-1] <= listener.burst_s + dt, rem[-1]
+    # (how close to the end the last status comes depends on wall-clock time: fast mode
+    # publishes a status after a burst only once 1/status_hz has passed, so on a quick
+    # machine the last ones are skipped; that it reaches the last batch is checked without
+    # a bus in test_stream_time_left.py)
     # the monitor (after the job: its duration; no time left shown then) and the CLI
     assert after["progress"]["duration_s"] == pytest.approx(duration)
     assert after["progress"]["fraction"] == pytest.approx(1.0, abs=1e-6)
