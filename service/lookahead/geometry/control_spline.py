@@ -37,12 +37,10 @@ import math
 import numpy as np
 from scipy.interpolate import BSpline, PPoly
 
-from lookahead.geometry.arclength import Leaves
 from lookahead.geometry.base import Path
 from lookahead.geometry.blends import turn_angle
 from lookahead.geometry.piecewise import ppoly_from_bspline
-from lookahead.geometry.polyline import MAX_BLEND_TURN, MIN_BLEND, joined_spline_path
-from lookahead.geometry.spline_path import SplinePath
+from lookahead.geometry.polyline import MAX_BLEND_TURN, MIN_BLEND, FinalPieces
 from lookahead.geometry.streaming import _Buffer
 
 #: a vertex turning by at most this (rad) between lengths within PLAIN_RATIO of each other
@@ -81,13 +79,7 @@ class ControlSpline:
         self._run_q = _Buffer((naxes,))  # control points of the current run
         self._run_c = _Buffer(())  # their chord u
         self._run_spans = 0  # final spans emitted of the current run
-        self._coef = _Buffer((_DEG + 1, naxes), axis=1)  # final pieces
-        self._x = _Buffer(())
-        self._leaf_start = _Buffer(())
-        self._leaf_length = _Buffer(())
-        self._leaf_count = _Buffer((), dtype=int)
-        self._u_final = 0.0
-        self._s_final = 0.0
+        self._final = FinalPieces(_DEG, naxes, self.path_scale)
         self._finished = False
         #: per decided vertex: "plain", "group" or "stop"
         self.kinds: list[str] = []
@@ -208,15 +200,8 @@ class ControlSpline:
     def _emit_spans(self, i0: int, i1: int, complete: bool) -> None:
         if i1 <= i0:
             return
-        pp = self._pieces(self._run_q.view(), self._run_c.view(), i0, i1, complete)
-        self._coef.append(pp.c)
-        self._x.append(pp.x[:-1])
-        leaves = SplinePath(pp, self.path_scale).leaves
-        self._leaf_start.append(leaves.start)
-        self._leaf_length.append(leaves.length)
-        self._leaf_count.append(leaves.count)
-        self._u_final = float(pp.x[-1])
-        self._s_final = float(np.cumsum(np.concatenate([[self._s_final], leaves.length]))[-1])
+        self._final.append(self._pieces(self._run_q.view(), self._run_c.view(), i0, i1,
+                                        complete))
         self._run_spans = i1
 
     def flush(self) -> None:
@@ -226,22 +211,18 @@ class ControlSpline:
     # --- output -----------------------------------------------------------------------
     @property
     def final_length(self) -> float:
-        return self._s_final
+        return self._final.s_final
 
     def _assemble(self, tail: PPoly | None) -> Path:
-        x, coef = self._x.view(), self._coef.view()
-        leaves = Leaves(self._leaf_start.view(), self._leaf_length.view(),
-                        self._leaf_count.view())
-        return joined_spline_path(x, coef, leaves, self._u_final, tail, self.path_scale)
+        return self._final.path(tail)
 
     def path_with(self, point: np.ndarray | None, c: float, tol: float) -> Path:
         """The path as if `point` were the last vertex (None: the current last vertex is
         the end), the state left unchanged."""
-        saved = [(b, b.size) for b in (self._w, self._c, self._tol, self._run_q, self._run_c,
-                                       self._coef, self._x, self._leaf_start,
-                                       self._leaf_length, self._leaf_count)]
+        saved = [(b, b.size) for b in (self._w, self._c, self._tol, self._run_q, self._run_c)]
+        final = self._final.mark()
         run = (self._run_q, self._run_c)
-        scalars = (self._run_spans, self._u_final, self._s_final, len(self.kinds))
+        scalars = (self._run_spans, len(self.kinds))
         try:
             if point is not None:
                 self._w.append(np.asarray(point, dtype=float)[None, :])
@@ -260,9 +241,10 @@ class ControlSpline:
         finally:
             for b, size in saved:
                 b.size = size
+            self._final.restore(final)
             self._run_q, self._run_c = run
-            self._run_spans, self._u_final, self._s_final = scalars[:3]
-            del self.kinds[scalars[3]:]
+            self._run_spans = scalars[0]
+            del self.kinds[scalars[1]:]
 
     def finish(self) -> Path:
         """The last vertex ends the path; everything final."""

@@ -93,6 +93,53 @@ def joined_spline_path(x: np.ndarray, coef: np.ndarray, leaves: Leaves, end: flo
     return SplinePath(pp, path_scale, continuity=2, leaves=leaves)
 
 
+class FinalPieces:
+    """The final pieces of a streamed spline path (fits `linear`, `smooth`): breakpoints,
+    coefficients and arc-length leaves, appended piece runs at a time, and where they end
+    (`u_final` in the path's parameter, `s_final` in path units)."""
+
+    def __init__(self, degree: int, naxes: int, path_scale: np.ndarray) -> None:
+        self.path_scale = path_scale
+        self._x = _Buffer(())  # start u of each final piece
+        self._coef = _Buffer((degree + 1, naxes), axis=1)
+        self._leaf_start = _Buffer(())
+        self._leaf_length = _Buffer(())
+        self._leaf_count = _Buffer((), dtype=int)
+        self.u_final = 0.0
+        self.s_final = 0.0
+
+    def _buffers(self) -> tuple[_Buffer, ...]:
+        return (self._x, self._coef, self._leaf_start, self._leaf_length, self._leaf_count)
+
+    def append(self, pp: PPoly) -> None:
+        """Append the pieces of `pp` (continuing at `u_final`)."""
+        self._x.append(pp.x[:-1])
+        self._coef.append(pp.c)
+        leaves = SplinePath(pp, self.path_scale).leaves
+        self._leaf_start.append(leaves.start)
+        self._leaf_length.append(leaves.length)
+        self._leaf_count.append(leaves.count)
+        self.u_final = float(pp.x[-1])
+        # continues the path's own sequential cumsum: bit-identical to its s at the knot
+        self.s_final = float(np.cumsum(np.concatenate([[self.s_final], leaves.length]))[-1])
+
+    def path(self, tail: PPoly | None) -> Path:
+        """The final pieces followed by `tail` (None: nothing) as one path."""
+        leaves = Leaves(self._leaf_start.view(), self._leaf_length.view(),
+                        self._leaf_count.view())
+        return joined_spline_path(self._x.view(), self._coef.view(), leaves, self.u_final,
+                                  tail, self.path_scale)
+
+    def mark(self) -> tuple:
+        """The state to go back to with `restore` (for a trial extension)."""
+        return tuple(b.size for b in self._buffers()), self.u_final, self.s_final
+
+    def restore(self, mark: tuple) -> None:
+        sizes, self.u_final, self.s_final = mark
+        for b, size in zip(self._buffers(), sizes, strict=True):
+            b.size = size
+
+
 class TolerancePointStream(PointStream):
     """A point stream whose points carry a corner tolerance (fits `linear`, `smooth`):
     `extend` takes one per chunk or per point; subclasses build geometry in `_finalize`.
@@ -133,13 +180,7 @@ class LinearFit(TolerancePointStream):
         self._end = -1  # kept-point index of the open run's end (the newest point)
         self._done = 0  # kept points processed
         self._pending: list[tuple[float, float, np.ndarray]] = []  # (u0, u1, coef)
-        self._x = _Buffer(())  # start u of each final piece
-        self._coef = _Buffer((_DEGREE + 1, self.naxes), axis=1)
-        self._leaf_start = _Buffer(())
-        self._leaf_length = _Buffer(())
-        self._leaf_count = _Buffer((), dtype=int)
-        self._u_final = 0.0
-        self._s_final = 0.0
+        self._final = FinalPieces(_DEGREE, self.naxes, self.path_scale)
         #: per final corner: (u of the vertex, blend reach back l_in and on l_out along
         #: the lines, in u; 0, 0 = exact stop)
         self.blends: list[tuple[float, float, float]] = []
@@ -259,21 +300,13 @@ class LinearFit(TolerancePointStream):
         self._pending = []
         if pp is None:
             return
-        self._x.append(pp.x[:-1])
-        self._coef.append(pp.c)
-        leaves = SplinePath(pp, self.path_scale).leaves
-        self._leaf_start.append(leaves.start)
-        self._leaf_length.append(leaves.length)
-        self._leaf_count.append(leaves.count)
-        self._u_final = float(pp.x[-1])
-        # continues the path's own sequential cumsum: bit-identical to its s at the knot
-        self._s_final = float(np.cumsum(np.concatenate([[self._s_final], leaves.length]))[-1])
+        self._final.append(pp)
 
     # --- output -----------------------------------------------------------------------
     @property
     def final_length(self) -> float:
         """Arc length (path units) up to which the geometry never changes again."""
-        return self._s_final
+        return self._final.s_final
 
     def path(self) -> Path:
         """The best current geometry (>= 2 kept points); identical to the final geometry
@@ -286,11 +319,7 @@ class LinearFit(TolerancePointStream):
 
     def _assemble(self, tail: list[tuple[float, float, np.ndarray]]) -> Path:
         """The final pieces followed by `tail` as one path."""
-        x, coef = self._x.view(), self._coef.view()
-        leaves = Leaves(self._leaf_start.view(), self._leaf_length.view(),
-                        self._leaf_count.view())
-        return joined_spline_path(x, coef, leaves, self._u_final, self._ppoly(tail),
-                                  self.path_scale)
+        return self._final.path(self._ppoly(tail))
 
     def _append_points(self, points: np.ndarray, u: np.ndarray, tol: np.ndarray) -> None:
         """Append kept points with given u (increasing, past the last) and tolerances, and
@@ -304,10 +333,8 @@ class LinearFit(TolerancePointStream):
     def path_with(self, points: np.ndarray, u: np.ndarray, tol: np.ndarray) -> Path:
         """The path as if `points` (with their u, tolerances) were appended next, without
         appending them (the fit's state is restored)."""
-        saved = (len(self._vert), self._end, self._done, len(self.blends), self._u.size,
-                 self._s_final, self._u_final)
-        sizes = [(b, b.size) for b in (self._x, self._coef, self._leaf_start,
-                                       self._leaf_length, self._leaf_count)]
+        saved = (len(self._vert), self._end, self._done, len(self.blends), self._u.size)
+        final = self._final.mark()
         self._u.append(u)
         self._pts.append(points)
         self._tol.append(tol)
@@ -325,9 +352,7 @@ class LinearFit(TolerancePointStream):
         self._pending = []
         for b in (self._u, self._pts, self._tol):
             b.size = saved[4]
-        for b, size in sizes:
-            b.size = size
-        self._s_final, self._u_final = saved[5], saved[6]
+        self._final.restore(final)
         return path
 
     def finish(self) -> Path:
