@@ -22,7 +22,7 @@ from lookahead.checker import check_positions
 from lookahead.geometry.spline_path import fit_points
 from lookahead.planning.base import PathState, PlanRequest
 from lookahead.planning.heuristic import HeuristicPlanner
-from lookahead.planning.heuristic.planner import LAYOUTS, Layout
+from lookahead.planning.heuristic.planner import FINE, ZERO_JUNCTIONS, Layout
 from lookahead.planning.heuristic.scan import reversed_phases
 from lookahead.planning.heuristic.scurve import (
     SCurveSolver,
@@ -102,7 +102,7 @@ def test_free_junctions_wind_faster_than_zero_acceleration_junctions(tube):
     plan has junction-free acceleration (the feed changes with a != 0 across segment
     ends, so |a| reaches its peak more than once per turnaround)."""
     free = _plan(tube)
-    zero = _plan(tube, HeuristicPlanner(margin=1.0, layouts=LAYOUTS[2:]))
+    zero = _plan(tube, HeuristicPlanner(margin=1.0, layouts=(ZERO_JUNCTIONS,)))
     assert free.profile.duration < 0.97 * zero.profile.duration
     report = _check(tube, free)
     assert report.ok, report.first
@@ -114,7 +114,7 @@ def test_fine_layout_at_the_feed_limit_keeps_the_velocity_limit():
     vmax by 1e-8 relative until the velocity share (< 1) kept a hair below it. (The
     coarse bands too: the near-zero-feed test below broke it by 4e-8.)"""
     path = fit_points(fourier_points(800, seed=9), SCALE, "cubic")
-    fine = LAYOUTS[1]
+    fine = FINE
     planner = HeuristicPlanner(margin=1.0, layouts=(Layout(fine.band_ratio, fine.shares),))
     result = _plan(path, planner)
     report = _check(path, result)
@@ -169,13 +169,12 @@ def test_smooth_path_has_no_jerk_chattering():
 
 
 def test_never_slower_than_the_zero_acceleration_junctions_on_wandering_paths():
-    """The fastest verified layout wins, and the paper's zero-acceleration junctions are
-    among the layouts: on random wandering paths the plan is never slower than theirs, and
-    passes the checker."""
+    """The fastest verified layout wins: on random wandering paths the plan is never slower
+    than the paper's zero-acceleration junctions, and passes the checker."""
     for seed in (1, 2, 3):
         path = fit_points(wandering_points(seed), SCALE, "cubic")
         free = _plan(path)
-        zero = _plan(path, HeuristicPlanner(margin=1.0, layouts=LAYOUTS[2:]))
+        zero = _plan(path, HeuristicPlanner(margin=1.0, layouts=(ZERO_JUNCTIONS,)))
         assert free.profile.duration <= zero.profile.duration * (1 + 1e-9)
         report = _check(path, free)
         assert report.ok, (seed, report.first)

@@ -1,7 +1,9 @@
 """The LP backends' warm starts: the persistent HiGHS model answers a sequence of re-solves
 (other objective, other bounds, other matrix, an infeasible one in between) exactly as a
 cold solve does, and OSQP's warm start maps primal and dual values onto the rows and nodes
-that two windows share."""
+that two windows share. OSQP's lifted rows are exact, its row classes and feasibility pull
+do what they say, and on the LPs the planner builds for corpus paths it meets the rows and
+HiGHS's objective."""
 
 from __future__ import annotations
 
@@ -11,14 +13,25 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from lookahead.planning.lp.rows import Rows
+from lookahead.planning.lp.osqp_lift import lift_rows
+from lookahead.planning.lp.rows import (
+    GridGeometry,
+    Rows,
+    acceleration_rows,
+    jerk_change_rows,
+    jerk_rows,
+)
 from lookahead.planning.lp.solve import (
     HighsBackend,
     MilpBackend,
     OsqpBackend,
     ScaledLP,
     _match,
+    _pull_inside,
+    _worst_excess,
+    bound_normalized_rows,
     make_backend,
+    regularizer_rows,
     row_keys,
 )
 
@@ -101,7 +114,7 @@ def test_osqp_warm_start_from_the_solution_itself_converges_at_once():
     """Re-solving the problem it has just solved, OSQP starts at its own primal and dual
     solution: it must converge in far fewer iterations than the cold solve did."""
     lp = feed_lp(40, 7, nodes=np.arange(40.0))
-    backend = OsqpBackend()
+    backend = OsqpBackend(prox_steps=0)  # the ADMM stage alone (prox steps re-centre)
     cold = backend.solve(lp)
     again = backend.solve(lp)
     assert cold.ok and again.ok, (cold.status, again.status)
@@ -144,3 +157,126 @@ def test_highs_without_highspy_is_scipys_milp(monkeypatch):
     monkeypatch.setitem(sys.modules, "highspy", None)  # import raises ImportError
     assert isinstance(make_backend("highs"), MilpBackend)
     assert isinstance(make_backend("highs-milp"), MilpBackend)
+
+
+def test_lift_rows_rewrites_band_rows_exactly():
+    """Band rows (3 and 4 columns wide) on the differences of z give A z for the lifted
+    vector of any z, whose chain rows are 0; a row wider than the lift stays on z; a
+    lifted vector whose differences are not those of its z breaks the chain."""
+    rng = np.random.default_rng(11)
+    n = 30
+    parts = [sp.diags([rng.normal(size=n - 2), rng.normal(size=n - 2), rng.normal(size=n - 2)],
+                      [0, 1, 2], shape=(n - 2, n)),
+             sp.diags([rng.normal(size=n - 3) for _ in range(4)], [0, 1, 2, 3],
+                      shape=(n - 3, n))]
+    wide = np.zeros((1, n))
+    wide[0, [2, 9, 20]] = rng.normal(size=3)  # spans 19 columns
+    A = sp.vstack([*parts, sp.csr_matrix(wide)]).tocsr()
+    lifted = lift_rows(A)
+    z = rng.uniform(size=n)
+    x = lifted.extend(z)
+    assert x.size == lifted.size == n + (n - 1) + (n - 2) + (n - 3)
+    np.testing.assert_allclose(lifted.rows @ x, A @ z, rtol=1e-12, atol=1e-12)
+    assert np.max(np.abs(lifted.chain @ x)) <= 1e-12
+    # the wide row kept its coefficients on z
+    np.testing.assert_array_equal(np.sort(lifted.rows.tocsr()[-1].indices), [2, 9, 20])
+    bad = x.copy()
+    bad[lifted.offsets[2] + 5] += 1e-3
+    assert np.max(np.abs(lifted.chain @ bad)) >= 1e-3
+
+
+def _helix_geometry(n: int = 80) -> GridGeometry:
+    from lookahead.config import default_config
+    from lookahead.geometry import fit_points
+
+    cfg = default_config()
+    t = np.linspace(0.0, 1.0, 400)
+    pts = np.stack([300.0 * t, 2.0 * np.pi * 3.0 * t * 57.29577951308232], axis=1)
+    path = fit_points(pts, np.asarray(cfg.machine.path_scale), "cubic")
+    return GridGeometry.sample(path, np.linspace(0.0, path.length, n)), cfg.machine.limits
+
+
+def test_regularizer_rows_are_exactly_the_jerk_change_rows():
+    """Of the rows the planner stacks (acceleration, nodal and midpoint jerk, jerk change),
+    `regularizer_rows` picks exactly the jerk-change block, after ScaledLP's scaling and
+    the bound normalization OSQP sees."""
+    geo, lim = _helix_geometry()
+    n = geo.n_nodes
+    ones = np.ones(n)
+    q_star = np.full(n, 100.0)
+    acc = acceleration_rows(geo, lim.amax, ones)
+    jerk = jerk_rows(geo, lim.jmax, ones, q_star, 1e-6)
+    change = jerk_change_rows(geo, lim.jmax, q_star, 1e-6, 0.15)
+    rows = Rows.stack([acc, jerk, change], n)
+    lp = ScaledLP.build(np.ones(n), np.zeros(n), np.full(n, 1e4), rows)
+    A, lo, hi = bound_normalized_rows(lp, 1e-3)
+    mask = regularizer_rows(A, lo, hi)
+    expected = np.r_[np.zeros(acc.A.shape[0] + jerk.A.shape[0], dtype=bool),
+                     np.ones(change.A.shape[0], dtype=bool)]
+    assert change.A.shape[0] > 0 and jerk.A.shape[0] > 0
+    np.testing.assert_array_equal(mask, expected)
+
+
+def test_pull_inside_scales_onto_homogeneous_rows_only():
+    """From rest to rest (z = 0 feasible) a point exceeding rows is scaled onto them; with
+    a fixed moving start (a lower bound > 0) it is left alone."""
+    lp = feed_lp(40, 5)
+    A, lo, hi = bound_normalized_rows(lp, 1e-3)
+    best = MilpBackend().solve(lp)
+    z = 1.02 * best.q / lp.q_scale  # 2 % too fast: exceeds some rows
+    excess = _worst_excess(A, lo, hi, z)
+    assert excess > 0.0
+    pulled, after = _pull_inside(A, lo, hi, lp.lower, z, excess)
+    assert after <= 1e-12
+    assert np.all(pulled <= z) and float(np.max(pulled / np.maximum(z, 1e-300))) > 0.97
+    moving = lp.lower.copy()
+    moving[0] = 0.5
+    same, same_excess = _pull_inside(A, lo, hi, moving, z, excess)
+    assert same is z and same_excess == excess
+
+
+def _window_lps(name: str) -> list:
+    """The LPs LPPlanner (HiGHS, cold) solves planning corpus path `name` as one job."""
+    from bench.corpus import load_corpus
+
+    from lookahead.planning.base import PathState, PlanRequest
+    from lookahead.planning.lp import LPPlanner
+
+    p = load_corpus("fast", pattern=name)[0]
+    path, m = p.path(), p.config.machine
+    request = PlanRequest(path, m.limits.scaled(p.config.planner.margin), PathState(0.0),
+                          path.length, feed_cap=p.geometry().feed_cap(), dt=m.dt)
+    seen = []
+
+    class Recording(MilpBackend):
+        def solve(self, lp, z0=None):
+            out = super().solve(lp, z0)
+            seen.append((lp, out))
+            return out
+
+    planner = LPPlanner(solver="highs-milp")
+    planner.backend = Recording()
+    planner.plan(request)
+    return seen
+
+
+@pytest.mark.parametrize("name", ["w-polar-dome-R30-a5-0p5mm", "n-circle-R30"])
+def test_osqp_solves_the_planners_lps_on_corpus_paths_like_highs(name):
+    """Every LP HiGHS solved for the job (the v+a pass and the jerk passes with their
+    jerk-change rows, where OSQP without the lift stopped at max_iter): OSQP accepts an
+    answer that meets the limit rows to its `accept_violation` and the bounds exactly, and
+    its objective is within 1 % of HiGHS's optimum."""
+    lps = _window_lps(name)
+    assert len(lps) >= 2
+    backend = OsqpBackend()
+    for lp, ref in lps:
+        assert ref.ok, ref.status
+        out = backend.solve(lp)
+        assert out.ok, out.status
+        z = out.q / lp.q_scale
+        assert np.all(z >= lp.lower - 1e-12) and np.all(z <= lp.upper + 1e-12)
+        A, lo, hi = bound_normalized_rows(lp, backend.bound_floor)
+        hard = ~regularizer_rows(A, lo, hi)
+        assert _worst_excess(A[hard], lo[hard], hi[hard], z) <= backend.accept_violation
+        best = float(lp.cost @ (ref.q / lp.q_scale))
+        assert float(lp.cost @ z) == pytest.approx(best, rel=1e-2)

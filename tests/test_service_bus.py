@@ -218,7 +218,11 @@ def test_curve_pieces_over_the_bus_stop_only_at_the_corner(harness_factory):
     pos, vel, _ = check_job(h.wait_final("curves"), h.cfg, [0.0, 0.0], [0.0, 0.0])
     speed = path_speed(vel, h.cfg)
     i = int(np.argmin(np.linalg.norm(pos - CORNER, axis=1)))
-    assert np.linalg.norm(pos[i] - CORNER) < 1e-6 and speed[i] < 1e-3
+    # at rest within dt/2 of that sample (the bound of test_stream_jobs' engine test: a
+    # plan through the corner in one piece rests there between two samples)
+    jerk = float(np.linalg.norm(h.cfg.machine.limits.jmax * np.asarray(h.cfg.machine.path_scale)))
+    assert np.linalg.norm(pos[i] - CORNER) < 1e-6
+    assert speed[i] <= 0.5 * jerk * (h.cfg.machine.dt / 2) ** 2
     near_join = np.linalg.norm(pos - SMOOTH_JOIN, axis=1) < 1.0
     assert near_join.any() and np.min(speed[near_join]) > 1.0
     assert not h._events_of("rejected", None) and not h._events_of("fault", None)

@@ -35,9 +35,11 @@ class Samples:
         return int(self.pos.shape[0])
 
 
-def _robust_path_state(profile: FeedProfile, t: np.ndarray) -> tuple[np.ndarray, ...]:
-    """s, v, a at times t with the near-zero-feed guards described in the module doc."""
-    s, v, a, _ = profile.at(t)
+def _robust_path_state(profile: FeedProfile, t: np.ndarray, raw: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, ...]:
+    """s, v, a at times t with the near-zero-feed guards described in the module doc.
+    raw: `profile.at(t)` if the caller has it already (rows s, v, a[, j])."""
+    s, v, a = (profile.at(t) if raw is None else raw)[:3]
     s_lo = float(profile.s_of_t(profile.s_of_t.x[0]))
     s_hi = float(profile.s_of_t(profile.s_of_t.x[-1]))
     s = np.clip(s, min(s_lo, s_hi), max(s_lo, s_hi))
@@ -48,8 +50,15 @@ def _robust_path_state(profile: FeedProfile, t: np.ndarray) -> tuple[np.ndarray,
 
 def sample_profile(path: Path, profile: FeedProfile, t: np.ndarray) -> Samples:
     """Axis pos/vel/acc at profile times t (s from the profile's start; clipped to it)."""
+    return sample_profile_states(path, profile, t)
+
+
+def sample_profile_states(path: Path, profile: FeedProfile, t: np.ndarray,
+                          raw: np.ndarray | None = None) -> Samples:
+    """`sample_profile`, given `raw` = profile.at(t) (rows s, v, a[, j]) when the caller
+    has evaluated it already (the same values: `FeedProfile.at` is pointwise)."""
     t = np.atleast_1d(np.asarray(t, dtype=float))
-    s, v, a = _robust_path_state(profile, t)
+    s, v, a = _robust_path_state(profile, t, raw)
     d = path.eval_s(s, order=2)
     vel = d[1] * v[:, None]
     acc = d[2] * (v * v)[:, None] + d[1] * a[:, None]

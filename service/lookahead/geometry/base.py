@@ -56,11 +56,18 @@ class Path(ABC):
         Returns shape (order + 1, len(s), naxes): [x, x_s, x_ss, x_sss][:order+1]
         (see `arc_length_derivatives`)."""
         s = np.atleast_1d(np.asarray(s, dtype=float))
-        d = self.eval_u(self.u_of_s(s), order=max(order, 1))
-        # orders not asked for are zero-padded: x_s..x_s^(order) do not depend on them
-        d = np.concatenate([d, np.zeros((4 - d.shape[0], *d.shape[1:]))])
-        _, xs, xss, xsss = arc_length_derivatives(d, self.path_scale)
-        return np.stack([d[0], xs, xss, xsss])[: order + 1]
+        u = self.u_of_s(s)
+        if order <= 0:
+            return self.eval_u(u, order=0)[:1]
+        d = self.eval_u(u, order=min(order, 3))
+        if order >= 3:
+            _, xs, xss, xsss = arc_length_derivatives(d, self.path_scale)
+            return np.stack([d[0], xs, xss, xsss])
+        # x_s and x_ss do not depend on x_uuu: the same values as the full chain rule,
+        # without evaluating or differentiating what is not asked for
+        _, _, _, _, xs, xss = _chain_rule_2(d[1], d[2] if order >= 2 else None,
+                                            self.path_scale)
+        return np.stack([d[0], xs] if order == 1 else [d[0], xs, xss])
 
     @abstractmethod
     def breakpoints_s(self) -> np.ndarray:
@@ -89,17 +96,29 @@ def arc_length_derivatives(d: np.ndarray, path_scale: np.ndarray
     u_sss = (3 sigma_u^2 - sigma sigma_uu) / sigma^5.
     """
     xu, xuu, xuuu = d[1], d[2], d[3]
+    w = np.asarray(path_scale, dtype=float) ** 2
+    sigma, us, sigma_u, uss, xs, xss = _chain_rule_2(xu, xuu, path_scale)
+    us2 = us * us
+    sigma_uu = ((xuu * xuu) @ w + (xu * xuuu) @ w - sigma_u * sigma_u) * us
+    usss = (3.0 * sigma_u * sigma_u - sigma * sigma_uu) * (us2 * us2 * us)
+    xsss = xuuu * (us2 * us)[:, None] + xuu * (3.0 * us * uss)[:, None] + xu * usss[:, None]
+    return sigma, xs, xss, xsss
+
+
+def _chain_rule_2(xu: np.ndarray, xuu: np.ndarray | None, path_scale: np.ndarray
+                  ) -> tuple[np.ndarray, ...]:
+    """The first two orders of `arc_length_derivatives`: sigma, u_s, sigma_u, u_ss, x_s,
+    x_ss (the last four None without xuu)."""
     # weighted sums over the few axes as matrix-vector products, reciprocals reused: half
     # the time of axis-wise sums and divisions on the 10^5 points of a long job
     w = np.asarray(path_scale, dtype=float) ** 2
     sigma = np.maximum(np.sqrt((xu * xu) @ w), np.finfo(float).tiny)
     us = 1.0 / sigma
+    xs = xu * us[:, None]
+    if xuu is None:
+        return sigma, us, None, None, xs, None
     sigma_u = ((xu * xuu) @ w) * us
-    sigma_uu = ((xuu * xuu) @ w + (xu * xuuu) @ w - sigma_u * sigma_u) * us
     us2 = us * us
     uss = -sigma_u * us2 * us
-    usss = (3.0 * sigma_u * sigma_u - sigma * sigma_uu) * (us2 * us2 * us)
-    xs = xu * us[:, None]
     xss = xuu * us2[:, None] + xu * uss[:, None]
-    xsss = xuuu * (us2 * us)[:, None] + xuu * (3.0 * us * uss)[:, None] + xu * usss[:, None]
-    return sigma, xs, xss, xsss
+    return sigma, us, sigma_u, uss, xs, xss

@@ -147,6 +147,33 @@ def path_deviation(path: Path, points: np.ndarray, per_interval: int = 32,
                      float(path.s_of_u(np.array([all_u[i]]))[0]))
 
 
+#: a chord-distance bound below tolerance * (1 - this) is certainly inside the tolerance
+#: (the exact measure differs from it by rounding only, ~1e-15 relative)
+_BOUND_REL = 1e-9
+
+
+def _own_chord_distance(x: np.ndarray, points: np.ndarray, path_scale: np.ndarray, k0: int,
+                        k1: int, per: int, lo: int, hi: int) -> np.ndarray:
+    """(m,) distances (path units) of positions x (m, naxes; `per` consecutive samples
+    in each knot interval k0..k1-1) from the chord points[i] -> points[i+1] of their own
+    interval i: an upper bound on the distance from the polyline of points[lo:hi], which
+    holds that chord (+inf where it does not: no bound)."""
+    scale = np.asarray(path_scale, dtype=float).reshape(-1)
+    nint = k1 - k0
+    out = np.full((nint, per), np.inf)
+    i1 = min(k1, hi - 1)  # intervals k0..i1-1 have both chord ends in points[lo:hi]
+    n = i1 - k0
+    if n <= 0 or k0 < lo:
+        return out.ravel()
+    pts = np.asarray(points[k0:i1 + 1], dtype=float) * scale
+    a, ab = pts[:-1, None, :], (pts[1:] - pts[:-1])[:, None, :]
+    xm = x.reshape(nint, per, -1)[:n] * scale
+    denom = np.maximum(np.sum(ab * ab, axis=-1), 1e-300)
+    t = np.clip(np.sum((xm - a) * ab, axis=-1) / denom, 0.0, 1.0)
+    out[:n] = np.linalg.norm(xm - (a + t[..., None] * ab), axis=-1)
+    return out.ravel()
+
+
 @dataclass(frozen=True)
 class Excursion:
     """A stretch [s_start, s_end] (path units) where a path is more than the tolerance
@@ -182,10 +209,17 @@ def interval_excursions(path: Path, points: np.ndarray, k0: int, k1: int, tolera
     that stretch of the polyline, >= the distance to all of it)."""
     knots = path.breakpoints_u()
     lo, hi = max(k0 - context, 0), min(k1 + context + 1, len(points))
-    measure = PolylineDistance(points[lo:hi], path.path_scale)
     frac = np.arange(1, per_interval) / per_interval
     u = (knots[k0:k1, None] + np.diff(knots)[k0:k1, None] * frac[None, :]).ravel()
-    dev = measure(path.eval_u(u, 0)[0])
+    x = path.eval_u(u, 0)[0]
+    # the distance to the sample's own chord (points i, i+1 of its knot interval i) bounds
+    # its distance from the polyline; only samples whose bound comes near the tolerance
+    # are measured exactly (most of a smooth fit is far inside it), so `over` and every
+    # reported distance are those of measuring all of them
+    dev = _own_chord_distance(x, points, path.path_scale, k0, k1, per_interval - 1, lo, hi)
+    near = np.flatnonzero(dev > tolerance * (1.0 - _BOUND_REL))
+    if near.size:
+        dev[near] = PolylineDistance(points[lo:hi], path.path_scale)(x[near])
     over = dev > tolerance
     if not np.any(over):
         return []

@@ -157,7 +157,9 @@ class PiecewisePath(Path):
 
     def _speed(self, u: np.ndarray) -> np.ndarray:
         """sigma(u) = ||path_scale * dx/du||."""
-        xu = self._raw(u, 1)[1]
+        # a polynomial curve needs only dx/du (not x): half the evaluations of the
+        # arc-length quadrature and inversion, the same values
+        xu = self._numer[1](u) if self._weight is None else self._raw(u, 1)[1]
         return np.sqrt(np.sum((self.path_scale * xu) ** 2, axis=-1))
 
     # --- arc length -------------------------------------------------------------------

@@ -24,7 +24,7 @@ from lookahead.planning.base import (
     PlanRequest,
     PlanResult,
 )
-from lookahead.sampling import Samples, sample_profile
+from lookahead.sampling import Samples, sample_profile, sample_profile_states
 
 #: relative tolerance on arc lengths (fraction of the path length, at least 1 unit)
 S_TOL = 1e-9
@@ -44,6 +44,10 @@ class CommittedPlan:
     #: samples k = cache_k0, cache_k0 + 1, ... computed once (`with_samples`)
     cache: Samples | None = field(default=None, compare=False, repr=False)
     cache_k0: int = 0
+    #: the profile's raw (s, v, a) at samples k = cache_k0, ... (3, n): what `state` returns
+    #: there, evaluated once for all samples (`FeedProfile.at` is pointwise, so a value does
+    #: not depend on the other times evaluated with it)
+    states: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     @classmethod
     def anchor(cls, path: Path, result: PlanResult, k_plan: int, dt: float) -> CommittedPlan:
@@ -63,45 +67,60 @@ class CommittedPlan:
             return Samples(c.pos[sl], c.vel[sl], c.acc[sl])
         return sample_profile(self.path, self.profile, self.times(np.arange(k0, k0 + n), dt))
 
+    def _raw_states(self, lo: int, hi: int, dt: float) -> np.ndarray:
+        """The profile's (s, v, a) at samples lo .. hi-1 (3, hi - lo), from `states`
+        where it holds them."""
+        st = self.states
+        if st is not None and self.cache_k0 <= lo and hi <= self.cache_k0 + st.shape[1]:
+            return st[:, lo - self.cache_k0:hi - self.cache_k0]
+        return self.profile.at(self.times(np.arange(lo, hi), dt))[:3]
+
     def with_samples(self, dt: float, previous: CommittedPlan | None = None
                      ) -> tuple[CommittedPlan, int]:
         """This plan with its samples k_plan+1 .. k_end+3 computed once (the verification
-        and every batch slice them; sampling 10 at a time cost ~2 ms per batch), and the
-        first sample k_new that is not `previous`'s.
+        and every batch slice them; sampling 10 at a time cost ~2 ms per batch) and its
+        path states there (`states`), and the first sample k_new that is not `previous`'s.
 
         Where this plan's path state (s, v, a) equals the cached `previous` plan's at the
         same samples (to rounding: a replan that continues its last plan, the LP's seams),
         those samples are the previous plan's, verified already; only samples from k_new
         on are computed."""
-        ks = np.arange(self.k_plan + 1, self.k_end + 4)
-        k_new = int(ks[0])
+        k0, k1 = self.k_plan + 1, self.k_end + 4  # samples k0 .. k1 - 1
+        raw = self.profile.at(self.times(np.arange(k0, k1), dt))
+        mine_all = raw[:3]
+        k_new = k0
         old = previous.cache if previous is not None else None
         if old is not None:
+            assert previous is not None
             lo = max(k_new, previous.cache_k0)
-            hi = min(int(ks[-1]) + 1, previous.cache_k0 + len(old), previous.k_end)
+            hi = min(k1, previous.cache_k0 + len(old), previous.k_end)
             if hi > lo:
-                mine = self.profile.at(self.times(np.arange(lo, hi), dt))[:3]
-                theirs = previous.profile.at(previous.times(np.arange(lo, hi), dt))[:3]
+                mine = mine_all[:, lo - k0:hi - k0]
+                theirs = previous._raw_states(lo, hi, dt)
                 tol = np.array([S_TOL * max(float(np.max(np.abs(theirs[0]))), 1.0),
                                 1e-9 * (1.0 + float(np.max(np.abs(theirs[1])))),
                                 1e-9 * (1.0 + float(np.max(np.abs(theirs[2]))))])
                 same = np.all(np.abs(mine - theirs) <= tol[:, None], axis=0)
                 if lo == k_new:
                     k_new = lo + (int(np.argmin(same)) if not np.all(same) else same.size)
-        fresh = sample_profile(self.path, self.profile, self.times(np.arange(k_new, ks[-1] + 1),
-                                                                   dt))
-        if k_new > ks[0]:
+        fresh = sample_profile_states(self.path, self.profile,
+                                      self.times(np.arange(k_new, k1), dt), raw[:, k_new - k0:])
+        if k_new > k0:
             assert old is not None and previous is not None
-            kept = slice(int(ks[0]) - previous.cache_k0, k_new - previous.cache_k0)
+            kept = slice(k0 - previous.cache_k0, k_new - previous.cache_k0)
             fresh = Samples(*(np.vstack([getattr(old, f)[kept], getattr(fresh, f)])
                               for f in ("pos", "vel", "acc")))
-        return replace(self, cache=fresh, cache_k0=int(ks[0])), k_new
+        return replace(self, cache=fresh, cache_k0=k0, states=mine_all), k_new
 
     def state(self, k: int, dt: float) -> PathState:
         """Path state (s, ds/dt, d2s/dt2) at sample k (end state from k_end on)."""
         if k >= self.k_end:
             return PathState(self.s_end)
-        s, v, a, _ = self.profile.at(np.array([(k - self.k_plan) * dt]))[:, 0]
+        st = self.states
+        if st is not None and 0 <= k - self.cache_k0 < st.shape[1]:
+            s, v, a = st[:, k - self.cache_k0]
+        else:
+            s, v, a, _ = self.profile.at(np.array([(k - self.k_plan) * dt]))[:, 0]
         return PathState(float(s), max(float(v), 0.0), float(a))
 
     def remaining_s(self, k: int, dt: float) -> float:

@@ -4,9 +4,11 @@ repaired, on several layouts of planning segments (the fastest verified plan win
 
 1. Geometry on a grid of cells -> feed limit per cell (axis velocity, centripetal
    acceleration, geometric jerk, C1-knot cap, feed cap); cells grouped into planning
-   segments by bands of that limit (`path_limits`).
+   segments by bands of that limit (`path_limits`), split where a segment's constant cap
+   loses much time under the limit curve (`split`).
 2. Per segment a cruise cap V and path acceleration / jerk budgets A, J that keep every
-   axis term within its limit.
+   axis term within its limit, and acceleration budgets for lower feeds (`levels`: the
+   rises follow them).
 3. Junction states (feed and path acceleration) from the scans, one motion per planning
    segment between them (`scan`); where that finds no chain, and as a layout of its own,
    the paper's junctions with path acceleration 0 (`zero_junctions`). Steps 1-4 run per
@@ -28,6 +30,7 @@ import numpy as np
 from lookahead.limits import AxisLimits
 from lookahead.planning.base import FeedProfile, PathState, PlanningError, PlanRequest, PlanResult
 from lookahead.planning.heuristic.brake import BRAKE_TARGETS, Brake, phases_end, state_scale
+from lookahead.planning.heuristic.levels import LEVEL_FRACTIONS, FeedLevels, level_budgets
 from lookahead.planning.heuristic.path_limits import (
     BudgetShares,
     PathGrid,
@@ -44,6 +47,7 @@ from lookahead.planning.heuristic.scurve import (
     SegmentInfeasibleError,
     reachable_feed,
 )
+from lookahead.planning.heuristic.split import split_by_loss
 from lookahead.planning.heuristic.verify import failing_segments, sampled_failing_segments
 from lookahead.planning.heuristic.zero_junctions import (
     first_caps,
@@ -58,12 +62,29 @@ from lookahead.planning.heuristic.zero_junctions import (
 REPAIR_STEP = 0.85
 #: repair rounds a further layout gets once one has a verified profile (a compute bound:
 #: from a replan's moving start a layout that does not suit it failed all 12 rounds on
-#: the tubes, while 1 round sufficed in every winning case measured)
-OTHER_LAYOUT_ROUNDS = 2
+#: the tubes, while 1 round sufficed in every winning case measured; 1 instead of 2: the
+#: same whole-job plans on the 59 non-long corpus paths and the same windowed plans on 4
+#: fast-corpus paths, fast set 0.86 s CPU instead of 1.14)
+OTHER_LAYOUT_ROUNDS = 1
+#: repair rounds per layout in the first pass over the layouts (a compute bound: from a
+#: cold replan braking on the butterfly the coarse layout failed all 12 rounds, 1.55 s,
+#: while the wide one verified in 1; the winning layout needed 1 round in every case
+#: measured (see OTHER_LAYOUT_ROUNDS), so the full rounds only run where no layout
+#: verified within these)
+FIRST_PASS_ROUNDS = 2
+#: a layout planned after another one has a verified profile does not merge leading
+#: segments for the zero-junction fallback (a compute bound: on the B-spline corners a
+#: replan braking at a = -883 merged 180 segments of the wide layout, 0.67 s, to fail; the
+#: merged zero-junction plans won no layout on the fast corpus's replans)
+MERGE_IN_OTHER_LAYOUTS = False
 #: free-junction chains tried per round while leading segments are merged for a start
 #: state that cannot stop in the first one (a compute bound: on a polar dome a replan
 #: merged 60 times, each chain failing, 1.2 s; the merges are for the zero-junction plan)
 FREE_TRIES = 2
+
+
+class _RoundsExhaustedError(PlanningError):
+    """A layout's profile still failed verification after its last repair round."""
 
 
 @dataclass(frozen=True)
@@ -85,20 +106,52 @@ class Layout:
     max_segments: int | None = None
     #: False: the paper's junctions (path acceleration 0) only
     free_junctions: bool = True
+    #: split segments whose constant cap loses time under the limit curve (`split`)
+    split: SplitRule | None = None
+    #: acceleration budgets per feed level in the rises (`levels`); None: one per segment
+    levels: tuple[float, ...] | None = None
 
 
-#: layouts planned in turn, the fastest verified profile wins. Fine bands with most of
-#: amax / jmax for the geometry follow the feed-limit curve closely (on the tubes 2-10 %
-#: faster than the coarse layout, within 0-3 % of the LP); the paper's coarse bands with
-#: more room for path acceleration win on paths of sharp turns (random wandering paths:
-#: 25 % faster than the fine layout); the paper's own zero-acceleration junctions on the
-#: coarse bands are the last candidate, so no plan is slower than theirs (on a corpus CAM
-#: winding path they beat the free chain by 10 %). Measured on tests/heuristic_paths.py
-#: and the corpus's fast set.
-LAYOUTS = (Layout(1.25, BudgetShares()),
-           Layout(1.05, BudgetShares(centripetal=0.9, jerk_geometric=0.5),
-                  zero_fallback=False, max_segments=200),
-           Layout(1.25, BudgetShares(), free_junctions=False))
+@dataclass(frozen=True)
+class SplitRule:
+    """`split.split_by_loss` parameters: a segment is split where its cap loses more than
+    `rel_loss` of its time at the limit and more than `abs_dt` sample times, into runs
+    below / above `step` times its cap."""
+
+    rel_loss: float = 0.02
+    abs_dt: float = 1.0
+    step: float = 1.05
+
+
+#: the loss split of the coarse layouts: a segment is split where its cap loses > 2 % of
+#: its time at the limit and > 50 samples (a long stroke whose first cells sit 20 % lower:
+#: Fourier path 15.5 -> 12.8 s with the wider shares); 1 sample cut 2-3x as many short
+#: segments and lost 1-10 % on the circle, the near-cusp cycloid and the B-spline corners
+#: (more junctions); 20 samples won 0.2 % more on the Fourier path but made 12 jerk sign
+#: changes within 5 ms on the chattering test's Fourier path (50: 5; the test allows 8)
+COARSE_SPLIT = SplitRule(rel_loss=0.02, abs_dt=50.0, step=1.05)
+
+#: layouts planned in turn, the fastest verified profile wins. All free-junction layouts
+#: use feed-level acceleration budgets (`levels`; with the scan's forward rises after a
+#: restart, the coarse layout: circle -8 %, B-spline corners -15 %, near-cusp cycloid
+#: -21 %). The paper's coarse bands with the default shares win where the path turns
+#: sharply (corners, cycloids: the wider shares lose 10-50 % there); the same bands with
+#: more of amax / jmax for the geometry win where the limit curve is high and wavy
+#: (circle under per-axis limits -3.4 %, ellipse -4.6 %, flower -8 %, butterfly -3.3 %,
+#: polar dome -3.8 %); fine bands with most of amax / jmax follow the curve on the tubes (2-10 %
+#: faster than coarse, within 0-3 % of the LP; skipped above 200 segments, where they
+#: cost 2-3x and lost). The paper's own zero-acceleration junctions stay the coarse
+#: layouts' fallback but no longer a layout of their own: on the 56 non-long corpus paths
+#: they won none (ties on 5), at 10-40 % of the compute. Measured on
+#: tests/heuristic_paths.py and the corpus (fast set, and all but the long paths).
+COARSE = Layout(1.25, BudgetShares(), split=COARSE_SPLIT, levels=LEVEL_FRACTIONS)
+COARSE_WIDE = Layout(1.25, BudgetShares(centripetal=0.75, jerk_geometric=0.4),
+                     split=COARSE_SPLIT, levels=LEVEL_FRACTIONS)
+FINE = Layout(1.05, BudgetShares(centripetal=0.9, jerk_geometric=0.5), zero_fallback=False,
+              max_segments=200, levels=LEVEL_FRACTIONS)
+#: the paper's heuristic: zero-acceleration junctions only (for comparisons)
+ZERO_JUNCTIONS = Layout(1.25, BudgetShares(), free_junctions=False)
+LAYOUTS = (COARSE, COARSE_WIDE, FINE)
 
 
 class HeuristicPlanner:
@@ -202,33 +255,61 @@ class HeuristicPlanner:
                      limits: AxisLimits) -> tuple[Phases, dict]:
         """The fastest verified profile over the layouts (PlanningError if none is)."""
         best, problem = None, ""
-        # the layout that won last first (a replan continues its plan); once one layout
-        # has a verified profile, the others get only OTHER_LAYOUT_ROUNDS repair rounds
+        # the layout that won last first (a replan continues its plan); first pass: each
+        # layout FIRST_PASS_ROUNDS repair rounds, once one has a verified profile the
+        # others only OTHER_LAYOUT_ROUNDS; second pass (none verified): the layouts that
+        # ran out of rounds get all of them, in the same order
         order = sorted(range(len(self.layouts)), key=lambda i: i != self._last_layout)
+        exhausted = []
         for i in order:
-            layout = self.layouts[i]
-            lim = vlim if layout.shares == self.shares else feed_limit(
-                grid, limits, layout.shares, request.feed_cap)
-            rounds = self.repair_rounds if best is None else min(self.repair_rounds,
-                                                                 OTHER_LAYOUT_ROUNDS)
+            rounds = min(self.repair_rounds,
+                         FIRST_PASS_ROUNDS if best is None else OTHER_LAYOUT_ROUNDS)
             try:
-                phases, info = self._plan_layout(request, grid, lim, limits, layout, rounds)
+                phases, info = self._layout_plan(request, grid, vlim, limits, i, rounds,
+                                                 best is None or MERGE_IN_OTHER_LAYOUTS)
             except PlanningError as exc:
                 problem = str(exc)
+                if isinstance(exc, _RoundsExhaustedError) and rounds < self.repair_rounds:
+                    exhausted.append(i)
                 continue
             duration = float(np.sum(phases.duration))
             if best is None or duration < best[2]:
                 best = (phases, {**info, "layout": i}, duration)
+        for i in exhausted if best is None else ():
+            try:
+                phases, info = self._layout_plan(request, grid, vlim, limits, i,
+                                                 self.repair_rounds, True)
+            except PlanningError as exc:
+                problem = str(exc)
+                continue
+            # the layouts after it already failed more rounds than they would now get
+            best = (phases, {**info, "layout": i}, float(np.sum(phases.duration)))
+            break
         if best is None:
             raise PlanningError(problem)
         self._last_layout = best[1]["layout"]
         return best[0], best[1]
 
+    def _layout_plan(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
+                     limits: AxisLimits, i: int, rounds: int, merge: bool
+                     ) -> tuple[Phases, dict]:
+        """`_plan_layout` for layout i, on the feed limit of its shares."""
+        layout = self.layouts[i]
+        lim = vlim if layout.shares == self.shares else feed_limit(
+            grid, limits, layout.shares, request.feed_cap)
+        return self._plan_layout(request, grid, lim, limits, layout, rounds, merge)
+
     def _plan_layout(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
-                     limits: AxisLimits, layout: Layout, rounds: int) -> tuple[Phases, dict]:
-        """Segments, S-curves, verification and repair from a start within the limits."""
+                     limits: AxisLimits, layout: Layout, rounds: int,
+                     merge: bool = True) -> tuple[Phases, dict]:
+        """Segments, S-curves, verification and repair from a start within the limits
+        (`merge`: see `_profile_phases`)."""
         shares = layout.shares
         starts = choose_segments(grid, vlim, layout.band_ratio)
+        if layout.split is not None:
+            rule = layout.split
+            starts = split_by_loss(grid.edges, vlim, starts, rule.rel_loss,
+                                   rule.abs_dt * request.dt, rule.step)
         if layout.max_segments is not None and starts.size - 1 > layout.max_segments:
             raise PlanningError(f"heuristic: layout of {starts.size - 1} segments skipped")
         factor = np.ones(starts.size - 1)
@@ -237,7 +318,7 @@ class HeuristicPlanner:
         for round_ in range(rounds):
             phases, starts, factor, free = self._profile_phases(
                 request, grid, starts, factor, vlim, limits, shares, layout.zero_fallback,
-                layout.free_junctions)
+                layout.free_junctions, layout.levels, merge)
             info["zero_junction_rounds"] += int(not free)
             profile = build_profile(phases)
             failing = failing_segments(profile, grid, starts, request.limits)
@@ -253,19 +334,20 @@ class HeuristicPlanner:
         info["segments"] = int(starts.size - 1)
         info["cells"] = grid.ncells
         if not info["verified"]:
-            raise PlanningError(f"heuristic: no profile within the limits after "
+            raise _RoundsExhaustedError(f"heuristic: no profile within the limits after "
                                 f"{info['rounds']} repair rounds")
         return phases, info
 
     def _profile_phases(self, request: PlanRequest, grid: PathGrid, starts: np.ndarray,
                         factor: np.ndarray, vlim: np.ndarray, limits: AxisLimits,
                         shares: BudgetShares, zero_fallback: bool = True,
-                        free: bool = True
+                        free: bool = True,
+                        levels: tuple[float, ...] | None = None, merge: bool = True
                         ) -> tuple[Phases, np.ndarray, np.ndarray, bool]:
         """The phases of one round: the free-junction chain, else zero junctions. If the
         start state cannot reach a valid end state within the first segment, its cruise
         cap is first lowered to the start feed (which raises its acceleration and jerk
-        budgets), then leading segments are merged."""
+        budgets), then leading segments are merged (if `merge`; else PlanningError)."""
         lowered = False
         v_cap = None
         tries = 0
@@ -273,7 +355,11 @@ class HeuristicPlanner:
             b = segment_budgets(grid, starts, vlim, limits, shares, factor, v_cap)
             if self.free_junctions and free and tries < FREE_TRIES:
                 tries += 1
-                parts = self._free_parts(request, grid, starts, b)
+                lv = None
+                if levels is not None:
+                    b, lv = level_budgets(grid, starts, vlim, limits, shares, b, factor,
+                                          v_cap, levels)
+                parts = self._free_parts(request, grid, starts, b, lv)
                 if parts is not None:
                     return concat_phases(parts), starts, factor, True
                 if not zero_fallback:
@@ -287,6 +373,9 @@ class HeuristicPlanner:
                 if not lowered and request.start.v > 0:
                     lowered = True
                     v_cap[0] = request.start.v
+                elif not merge:
+                    raise PlanningError("heuristic: the start state cannot stop in the "
+                                        "first segment (no merges in this layout)") from None
                 elif starts.size <= 2:
                     raise PlanningError("the start state cannot stop within the window "
                                         f"[{request.start.s}, {request.s_end}]") from None
@@ -297,7 +386,7 @@ class HeuristicPlanner:
                     v_cap = v_cap[1:]
 
     def _free_parts(self, request: PlanRequest, grid: PathGrid, starts: np.ndarray,
-                    b) -> list[Phases] | None:
+                    b, levels: FeedLevels | None = None) -> list[Phases] | None:
         st = request.start
         cap = junction_caps(request, grid, starts, b)
         # the chain's fallback feeds keep 1e-6 of each segment spare: at the exact
@@ -312,7 +401,7 @@ class HeuristicPlanner:
         b = replace(b, V=np.concatenate([[max(V0, b.V[0])], b.V[1:]]))
         cap[0] = st.v
         got = chain(self._solver, b, cap, w, (st.v, st.a), float(cap[-1]), A0,
-                    neighbour_min(b.J), neighbour_min(b.A))
+                    neighbour_min(b.J), neighbour_min(b.A), levels)
         return None if got is None else got[0]
 
     def _result(self, profile: FeedProfile, t_start: float, info: dict) -> PlanResult:

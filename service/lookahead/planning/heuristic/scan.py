@@ -10,8 +10,11 @@ junction k is the start of segment k (junction nseg is the window's end) and has
    towards its V (a deceleration seen backwards), cut where the segment ends: the fastest
    state at each junction from which the rest can still be followed. Where it arrives
    above a cap it restarts there at (cap, 0) (a critical point of the feed-limit curve),
-   and the motion from the restart to the next state is solved by Ruckig; where even that
-   fails it falls back to the zero-acceleration junction feeds.
+   and the motion from the restart to the next state is solved by Ruckig. Where that
+   fails (the next state is out of reach from the cap within the segment), with feed
+   levels: forward rises from the restart until Ruckig lands one on the scan, or one
+   Ruckig motion over several segments; the zero-acceleration junction feeds (from which
+   forward rises are tried once more) are the last resort.
 2. Forward chain from the start state: in each segment the fastest rise (full acceleration
    towards V) is taken while it stays below the backward scan and can still reach the
    backward state one junction further (a Ruckig segment, kept for the next step);
@@ -19,7 +22,8 @@ junction k is the start of segment k (junction nseg is the window's end) and has
    lies in that segment) and the chain follows the scan's own motions until a rise fits
    again. If neither fits, the blend is moved a junction back (backtracking), at the start
    over several segments at once.
-Rises are closed-form feed changes (`scurve.feed_change_phases`), blends are Ruckig
+Rises are closed-form feed changes (`rise`: one budget, or the segment's feed levels
+where given), blends are Ruckig
 state-to-state segments (target feed and acceleration). Returns None when no chain is
 found (the planner then falls back to zero junction accelerations or drops the layout).
 """
@@ -28,14 +32,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from lookahead.planning.heuristic.levels import FeedLevels
 from lookahead.planning.heuristic.path_limits import SegmentBudgets
+from lookahead.planning.heuristic.rise import rise as _rise
+from lookahead.planning.heuristic.rise import rise_levels
 from lookahead.planning.heuristic.scurve import (
     Phases,
     SCurveSolver,
     SegmentInfeasibleError,
-    cut_at,
-    cut_lists,
-    feed_change_lists,
+    split_at,
 )
 
 _REL = 1e-9  # relative feed tolerance when comparing a scan state with a cap
@@ -43,6 +48,11 @@ _REL = 1e-9  # relative feed tolerance when comparing a scan state with a cap
 V_ROOM = 1e-7
 #: most planning segments one blend may span when the switch lies beyond the next junction
 MAX_MERGE = 8
+#: most planning segments a forward rise after a restart may run before it lands on the
+#: backward scan (a compute bound: on the B-spline corners, the near-cusp cycloid and the
+#: butterfly every landing came within 15 segments, 90 % of failures within 5; 16 cost
+#: the ellipse's fine layout 30 % (1.455 -> 1.894 s), 32 and 64 plan it alike)
+MAX_ONTO = 32
 
 
 def neighbour_min(x: np.ndarray) -> np.ndarray:
@@ -54,27 +64,24 @@ def neighbour_min(x: np.ndarray) -> np.ndarray:
     return out
 
 
-def _rise(solver: SCurveSolver, s0: float, L: float, v: float, a: float, V: float,
-          A: float, J: float) -> tuple[Phases, float, float] | None:
-    """The fastest rise from (v, a) towards V over length L, cut at s0 + L."""
-    if abs(v - V) <= _REL * V and abs(a) <= 1e-12 * max(A, 1.0):
-        ph = Phases(np.array([L / v]), np.zeros(1), np.zeros(1), np.array([v]),
-                    np.array([s0])) if v > 0 else None
-        return (ph, v, 0.0) if ph is not None else None
-    lists = feed_change_lists(s0, v, a, V, A, J)
-    if lists is not None:
-        return cut_lists(*lists, s0 + L)
-    if abs(a) <= A:
-        return None
-    try:  # a start acceleration beyond the budget: Ruckig brakes it first
-        phases = solver.feed_change(s0, v, a, V, abs(a), J)
-    except SegmentInfeasibleError:
-        return None
-    return cut_at(phases, s0 + L) if phases.duration.size else None
+def _level_rise(solver: SCurveSolver, levels: FeedLevels | None, k: int, nb: int | None,
+                s0: float, L: float, v: float, a: float, V: float, A: float, J: float
+                ) -> tuple[Phases, float, float] | None:
+    """The rise of segment k towards V: under its feed levels (`rise.rise_levels`) where
+    they apply and the end state lies within the budget of segment `nb` (the one the
+    scan enters next), else under the single budget A."""
+    if levels is not None and levels.tops[k][-1] <= V:
+        got = rise_levels(s0, L, v, a, levels.tops[k], levels.accs[k], J)
+        if got is not None and (nb is None
+                                or abs(got[2]) <= levels.ceiling(nb, got[1]) * (1 + 1e-9)):
+            return got
+    return _rise(solver, s0, L, v, a, V, A, J)
 
 
 def backward_scan(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: np.ndarray,
-                  v_end: float, A: np.ndarray, J: np.ndarray, solve
+                  v_end: float, A: np.ndarray, J: np.ndarray, solve,
+                  levels: FeedLevels | None = None, keep_first: bool = False,
+                  first_curve: list | None = None
                   ) -> tuple[np.ndarray, list[Phases | None]]:
     """(nseg + 1, 2) backward scan states (v, a) at the junctions (a forward in time), and
     per segment the scan's own motion from its state at k to the one at k + 1 (forward in
@@ -84,15 +91,25 @@ def backward_scan(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: n
     states after it fall back to (w, 0) until `solve` connects them, at worst all the way
     (the zero-acceleration chain). The scan's motions are the fastest
     decelerations: their states lie on the edge of what Ruckig finds feasible, so the
-    chain uses these motions themselves rather than asking Ruckig again."""
+    chain uses these motions themselves rather than asking Ruckig again.
+
+    `first_curve` (a list): receives the scan's fastest motion over segment 0 onto the
+    state at junction 1 as it is before any cap (forward in time; nothing if it stops)
+    and that state,
+    where the chain lands a start state that lies inside it (`_land_in_first`)."""
     n = b.L.size
     out = np.zeros((n + 1, 2))
     out[n] = v_end, 0.0
     motions: list[Phases | None] = [None] * n
+    soft = np.zeros(n + 1, dtype=bool)  # states from forward rises (`_rise_onto`)
     for k in range(n - 1, -1, -1):
         v, a = float(out[k + 1, 0]), -float(out[k + 1, 1])
         L, V, Ak, Jk, c = float(b.L[k]), float(b.V[k]), float(A[k]), float(J[k]), float(cap[k])
-        got = _rise(solver, 0.0, L, v, a, V, Ak, Jk)
+        got = _level_rise(solver, levels, k, k - 1 if k > 0 else None, 0.0, L, v, a, V, Ak,
+                          Jk)
+        if k == 0 and first_curve is not None and got is not None:
+            first_curve.append((reversed_phases(got[0], float(b.s0[0]) + L),
+                                (float(out[1, 0]), float(out[1, 1]))))
         if got is not None and got[1] + got[2] * abs(got[2]) / (2.0 * Jk) > c * (1 + _REL):
             got = _rise(solver, 0.0, L, v, a, min(V, c), Ak, Jk)
         if got is not None and got[1] <= c * (1 + _REL):
@@ -103,9 +120,20 @@ def backward_scan(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: n
         # from there, so later states fall back to (cap, 0) until Ruckig connects
         out[k] = c, 0.0
         motions[k] = solve(k, out[k], out[k + 1])
-        if motions[k] is not None:
+        if motions[k] is not None or (k == 0 and keep_first):
+            # junction 0 is the start state: the forward chain reaches the scan from it
+            # (or backtracks); lowering the scan to zero-acceleration feeds there would
+            # hold the whole rise from the start at a = 0 junctions
             continue
-        out[k] = w[k], 0.0
+        if levels is not None:
+            args = (solver, b, cap, A, J, levels, solve, out, motions, soft, k)
+            if _rises_onto(args, False) or _merge_onto(b, cap, solve, out, motions, k):
+                continue
+            out[k] = w[k], 0.0
+            if _rises_onto(args, True):
+                continue
+        else:
+            out[k] = w[k], 0.0
         for i in range(k, n):
             motions[i] = solve(i, out[i], out[i + 1])
             if motions[i] is not None or i + 1 == n:
@@ -118,6 +146,135 @@ def backward_scan(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: n
                 if motions[i] is not None:
                     break
     return out, motions
+
+
+def _merge_onto(b: SegmentBudgets, cap: np.ndarray, solve, out: np.ndarray, motions: list,
+                k: int) -> bool:
+    """In place: one Ruckig motion from the restart state at junction k over segments
+    k .. k + m - 1 onto the scan's state at junction k + m (m = 2 .. MAX_MERGE), split into
+    per-segment motions and the states at the junctions between; False if none exists.
+    (A scan state just after a short segment, decelerating hard above the cap before it,
+    is reachable only by a motion over several segments.) The motion must pass each
+    junction within its cap (0 at a corner: no merge across it)."""
+    n = b.L.size
+    for m in range(2, min(MAX_MERGE, n - k) + 1):
+        if cap[k + m - 1] <= 0.0:
+            break
+        motion = solve(k, out[k], out[k + m], m)
+        if motion is None:
+            continue
+        parts, states = [], []
+        for i in range(k + 1, k + m):
+            got = split_at(motion, float(b.s0[i]))
+            if got is None:
+                break
+            first, motion, v, a = got
+            if v > cap[i] * (1 + _REL):
+                break
+            parts.append(first)
+            states.append((v, a))
+        else:
+            parts.append(motion)
+            for i, part in enumerate(parts):
+                motions[k + i] = part
+            for i, state in enumerate(states):
+                out[k + 1 + i] = state
+            return True
+    return False
+
+
+def _rises_onto(args: tuple, try_first: bool) -> bool:
+    """`_rise_onto` passing above soft states, then (if it met one) staying below them."""
+    got = _rise_onto(*args, try_first)
+    if got is False:
+        got = _rise_onto(*args, try_first, False)
+    return bool(got)
+
+
+def _rise_onto(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, A: np.ndarray,
+               J: np.ndarray, levels: FeedLevels, solve, out: np.ndarray,
+               motions: list, soft: np.ndarray, k: int, try_first: bool,
+               pass_soft: bool = True) -> bool | None:
+    """In place: the states after a restart at junction k that Ruckig cannot connect to
+    the scan's next state, from forward rises out of the restart state (fastest first, under
+    the feed levels) until Ruckig lands one on the scan; False (nothing changed) if no rise
+    does (None if it failed without passing a soft state). The forward-reachable states
+    replace the zero-acceleration feeds the scan would otherwise fall back to (after a
+    near-cusp they held the rise at a = 0 per segment).
+
+    States written here are marked `soft`: they bound nothing (a later restart's rise,
+    faster from further back, may pass above them; `pass_soft` False: it stays below them
+    too); the rise must stay below the others. `try_first`: also try Ruckig from the
+    restart state onto the next state first."""
+    n = b.L.size
+    saved = out.copy(), list(motions), soft.copy()
+    x = (float(out[k, 0]), float(out[k, 1]))
+    passed = False
+    for i in range(k, min(n, k + MAX_ONTO)):
+        target = out[i + 1].copy()
+        if i > k or try_first:
+            m = solve(i, x, target)
+            if m is not None:
+                motions[i] = m
+                return True
+        if i + 1 == n:
+            break
+        Ji = float(J[i])
+        got = _level_rise(solver, levels, i, i + 1, float(b.s0[i]), float(b.L[i]), x[0], x[1],
+                          float(b.V[i]), float(A[i]), Ji)
+        c_next = float(cap[i + 1])
+        if got is not None and got[1] + got[2] * abs(got[2]) / (2.0 * Ji) > c_next * (1 + _REL):
+            got = _rise(solver, float(b.s0[i]), float(b.L[i]), x[0], x[1],
+                        min(float(b.V[i]), c_next), float(A[i]), Ji)
+        hard = not (pass_soft and soft[i + 1])
+        passed |= not hard
+        if hard and got is not None and got[1] > target[0] * (1 + _REL):  # to the scan's feed
+            got = _rise(solver, float(b.s0[i]), float(b.L[i]), x[0], x[1],
+                        min(float(b.V[i]), float(target[0])), float(A[i]), Ji)
+        if got is None or (hard and got[1] > target[0] * (1 + _REL)):
+            break
+        out[i + 1] = got[1], got[2]
+        soft[i + 1] = True
+        motions[i] = got[0]
+        x = (got[1], got[2])
+    out[:] = saved[0]
+    motions[:] = saved[1]
+    soft[:] = saved[2]
+    return False if passed else None
+
+
+#: landing points tried on the first segment's scan motion (fractions of its length,
+#: earliest first: the earlier the start lands, the sooner it runs on the fastest motion)
+LAND_FRACTIONS = tuple(np.linspace(0.0625, 1.0, 16)[:-1])
+
+
+def _land_in_first(b: SegmentBudgets, curve: list, start: tuple[float, float],
+                   onto_state: np.ndarray, solve) -> Phases | None:
+    """A motion over segment 0 from the start state onto the state at junction 1: Ruckig
+    from the start onto the backward scan's fastest motion at a point inside segment 0,
+    then that motion to the segment's end; None if no landing point is reached.
+
+    A replan's start often lies on the scan motion of the plan it came from: braking
+    under the feed levels, which no single-budget Ruckig motion to junction 1 can follow
+    (a brake to rest at a window's end: twice the acceleration at low feed). The replan's
+    own scan passes a hair above or below it (its grid samples other points), so the
+    start cannot take over the scan at junction 0 but lands on it soon after.
+    `onto_state`: the scan's state at junction 1 (the curve must still end there)."""
+    if not curve or curve[0][1] != (float(onto_state[0]), float(onto_state[1])):
+        return None
+    s0, L = float(b.s0[0]), float(b.L[0])
+    for f in LAND_FRACTIONS:
+        got = split_at(curve[0][0], s0 + f * L)
+        if got is None:
+            continue
+        _, tail, v, a = got
+        if not v > 0.0:
+            continue
+        onto = solve(0, start, (v, a), length=f * L)
+        if onto is not None:
+            return Phases(*(np.concatenate([getattr(onto, n), getattr(tail, n)])
+                            for n in ("duration", "jerk", "acc", "vel", "pos")))
+    return None
 
 
 def reversed_phases(ph: Phases, s_end: float) -> Phases:
@@ -133,11 +290,14 @@ def reversed_phases(ph: Phases, s_end: float) -> Phases:
 
 
 def _rise_below(solver: SCurveSolver, b: SegmentBudgets, k: int, x: tuple[float, float],
-                A: float, J: float, cap_next: float) -> tuple[Phases, float, float] | None:
+                A: float, J: float, cap_next: float,
+                levels: FeedLevels | None = None) -> tuple[Phases, float, float] | None:
     """The fastest rise in segment k from state x towards its V, or towards the next cap
-    if it would arrive with more acceleration than it can shed below that cap."""
+    if it would arrive with more acceleration than it can shed below that cap; under the
+    segment's feed levels where given."""
     s0, L, V = float(b.s0[k]), float(b.L[k]), float(b.V[k])
-    got = _rise(solver, s0, L, x[0], x[1], V, A, J)
+    got = _level_rise(solver, levels, k, k + 1 if k + 1 < b.L.size else None, s0, L,
+                      x[0], x[1], V, A, J)
     if got is not None and got[1] <= cap_next \
             and got[1] + got[2] * abs(got[2]) / (2.0 * J) > cap_next * (1 + _REL):
         got = _rise(solver, s0, L, x[0], x[1], min(V, cap_next), A, J)
@@ -158,8 +318,8 @@ def _far_below(rise: tuple[Phases, float, float], b1: np.ndarray, b2: np.ndarray
 
 def chain(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: np.ndarray,
           start: tuple[float, float],
-          v_end: float, A_first: float, J_scan: np.ndarray, A_scan: np.ndarray
-          ) -> tuple[list[Phases], dict] | None:
+          v_end: float, A_first: float, J_scan: np.ndarray, A_scan: np.ndarray,
+          levels: FeedLevels | None = None) -> tuple[list[Phases], dict] | None:
     """One motion per planning segment between free junction states (module doc).
 
     Invariant (where it can be kept): the state reached at junction k can reach the
@@ -176,10 +336,13 @@ def chain(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: np.ndarra
     stats = {"rises": 0, "blends": 0, "backtracks": 0}
     s0s, Ls, Vs, As, Js = (x.tolist() for x in (b.s0, b.L, b.V, A_seg, b.J))
 
-    def solve(k: int, x0, x1, m: int = 1) -> Phases | None:
-        """Segments k .. k + m - 1 as one Ruckig motion from state x0 to state x1."""
+    def solve(k: int, x0, x1, m: int = 1, length: float | None = None) -> Phases | None:
+        """Segments k .. k + m - 1 as one Ruckig motion from state x0 to state x1 (over
+        the first `length` of segment k only, where given)."""
         if m == 1:
             L, V, A, J = Ls[k], Vs[k], As[k], Js[k]
+            if length is not None:
+                L = length
         else:
             sl = slice(k, k + m)
             L, V = float(np.sum(b.L[sl])), float(np.min(b.V[sl]))
@@ -195,7 +358,9 @@ def chain(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: np.ndarra
         except SegmentInfeasibleError:
             return None
 
-    bwd, bmot = backward_scan(solver, b, cap, w, v_end, A_sc, J_scan, solve)
+    curve: list = []
+    bwd, bmot = backward_scan(solver, b, cap, w, v_end, A_sc, J_scan, solve, levels,
+                              keep_first=levels is not None, first_curve=curve)
     if any(m is None for m in bmot[1:]):
         return None
     parts: list[Phases] = []
@@ -208,9 +373,12 @@ def chain(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: np.ndarra
             return None
         x = states[k]
         rise = None
-        if k + 1 < n:
+        # a deceleration beyond the segment's budget is the backward scan's, under its
+        # feed levels: nothing rises faster from there (the scan is the fastest state),
+        # and a rise would first need Ruckig to brake it (70 % of the rises on a dome)
+        if k + 1 < n and not (levels is not None and x[1] < -float(A_seg[k])):
             rise = _rise_below(solver, b, k, x, float(A_seg[k]), float(J_scan[k]),
-                               float(cap[k + 1]))
+                               float(cap[k + 1]), levels)
             if rise is not None and rise[1] > bwd[k + 1, 0] * (1 + _REL):
                 rise = None
         if rise is not None and _far_below(rise, bwd[k + 1], bwd[k + 2], Js[k]):
@@ -252,7 +420,15 @@ def chain(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: np.ndarra
                     if blend is not None:
                         break
                 if blend is None:
-                    return None
+                    landed = _land_in_first(b, curve, states[0], bwd[1], solve)
+                    if landed is None:
+                        return None
+                    parts = [landed]
+                    states = [states[0], (float(bwd[1, 0]), float(bwd[1, 1]))]
+                    k = floor = 1
+                    blend = bmot[1] if n > 1 else None
+                    stats["landed"] = 1
+                    break
                 parts = [blend]
                 states = states[:1] + [tuple(x) for x in bwd[1:m + 1]]
                 k = floor = m

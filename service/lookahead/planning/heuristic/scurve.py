@@ -270,3 +270,23 @@ def feed_change_lists(s0: float, v0: float, a0: float, V: float, A: float,
         v += a * d + j * d * d / 2.0
         a += j * d
     return h, jk, acc, vel, pos
+
+
+def split_at(phases: Phases, s_cut: float) -> tuple[Phases, Phases, float, float] | None:
+    """The phases before and after where they pass s_cut (inside them), and the feed and
+    acceleration there; None if they end before s_cut."""
+    got = cut_at(phases, s_cut)
+    if got is None:
+        return None
+    first, v, a = got
+    idx = first.duration.size - 1
+    if idx >= phases.duration.size:  # cut_at extended the motion: s_cut is beyond its end
+        return None
+    rest_h = float(phases.duration[idx] - first.duration[idx])
+    tail = slice(idx + 1, None)
+    second = Phases(np.concatenate([[rest_h], phases.duration[tail]]),
+                    np.concatenate([[phases.jerk[idx]], phases.jerk[tail]]),
+                    np.concatenate([[a], phases.acc[tail]]),
+                    np.concatenate([[v], phases.vel[tail]]),
+                    np.concatenate([[s_cut], phases.pos[tail]]))
+    return first, second, v, a

@@ -17,6 +17,10 @@ from lookahead.planning.heuristic.path_limits import PathGrid
 from lookahead.planning.heuristic.profile_build import state_at_s
 from lookahead.planning.sampled_check import profile_ratios
 
+#: largest feed at a corner, as a fraction of the smallest axis vmax (plans stop there: a
+#: rise from rest starts at feed 0 exactly; 1e-6 leaves room for rounding only)
+CORNER_FEED = 1e-6
+
 
 def failing_cells(profile: FeedProfile, grid: PathGrid, lim: AxisLimits) -> np.ndarray:
     """(ncell,) True where some axis exceeds `lim` at one of the cell's points."""
@@ -29,7 +33,14 @@ def failing_cells(profile: FeedProfile, grid: PathGrid, lim: AxisLimits) -> np.n
     bad = np.abs(xs * v) > lim.vmax
     bad |= np.abs(xss * (v * v) + xs * a) > lim.amax
     bad |= np.abs(xsss * (v * v * v) + xss * (3.0 * v * a) + xs * j) > jmax
-    return bad.reshape(ncell, -1).any(axis=1)
+    out = bad.reshape(ncell, -1).any(axis=1)
+    corners = np.nonzero(grid.corner_after)[0]
+    if corners.size:
+        # the machine stops at a corner (the grid's points stay a quarter cell away from
+        # it, so the terms above do not see a feed kept through one)
+        v_corner = state_at_s(profile, grid.edges[corners + 1])[0]
+        out[corners] |= np.abs(v_corner) > CORNER_FEED * float(np.min(lim.vmax))
+    return out
 
 
 def failing_segments(profile: FeedProfile, grid: PathGrid, starts: np.ndarray,

@@ -66,3 +66,29 @@ def reachable_q(d: np.ndarray, v0: float, a0: float, J: float, A: float,
             t = np.clip(t - step, 0.0, t_hi)
         q[k] = np.maximum(speed(t), 0.0) ** 2
     return q
+
+
+def braking_q(d: np.ndarray, v0: float, a0: float, J: float, A: float,
+              table: int = 4097) -> np.ndarray:
+    """The smallest q = v^2 at distance d >= 0 from state (v0, a0) (path units, /s, /s^2)
+    along the hardest jerk-limited braking: jerk -J until the acceleration is -A, then
+    acceleration -A until the feed is 0; q = 0 beyond. Every motion from that state with
+    path jerk >= -J and acceleration >= -A has at least this q at every d (it is never
+    slower at equal time, nor at equal distance). Hand-written like `reachable_q`: closed
+    form in t, read off a table at the distances (no library gives q(d) of an S-curve)."""
+    d = np.asarray(d, dtype=float)
+    a0 = max(a0, -A)
+    t1 = (a0 + A) / J  # jerk phase
+    v1 = v0 + a0 * t1 - 0.5 * J * t1**2
+    # the feed vanishes in the jerk phase, or at the end of the constant -A phase
+    t_end = (a0 + np.sqrt(a0**2 + 2.0 * J * v0)) / J if v1 <= 0.0 else t1 + v1 / A
+    t = np.linspace(0.0, t_end, table)
+    jt = np.minimum(t, t1)
+    v = v0 + a0 * jt - 0.5 * J * jt**2 - A * np.maximum(t - t1, 0.0)
+    dist_j = v0 * jt + 0.5 * a0 * jt**2 - J * jt**3 / 6.0
+    tc = np.maximum(t - t1, 0.0)
+    dist = dist_j + np.where(t > t1, v1 * tc - 0.5 * A * tc**2, 0.0)
+    v = np.maximum(v, 0.0)
+    dist = np.maximum.accumulate(dist)
+    q = np.interp(d, dist, v**2, right=0.0)
+    return q

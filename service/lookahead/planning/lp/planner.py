@@ -15,9 +15,29 @@ a moving end, and lower bounds. Lower bounds are never imposed: the stall floors
 `_unstall` are tried and dropped when infeasible. The grid is refined where the path bends
 sharply (`refine`), so the nodal rows see a near-cusp; a near-reversal too sharp for
 any grid (`lp.grid.near_reversals`) becomes a rest node, like a corner. A repair loop far
-from converging gives up early (HOPELESS_RATIO). A moving start or seam that still
-fails goes, in this order, to: a smaller kept head of the last plan, a cold plan from the
-start state, then the caller (the engine's stop planner, counted as a fallback).
+from converging gives up early (HOPELESS_RATIO).
+
+A moving start (not on the last plan) is handed over by another plan, often one at the
+full limits (the heuristic's, after a fallback), while the LP's rows are the limits times
+margins; built in, always: the velocity caps leave room for the braking from the start
+state (`_brake_room`: from v_cap with a = 0 no bounded jerk reaches 0.995 v_cap within one
+node, the cascade of issue 13), a braking start's envelope releases at least as fast as
+a0^2 / v0 (else it forced a stall), the first node has an exact jerk row
+(`rows.start_jerk_rows`), and a start above the limits (an override) is judged against
+its own excess while a braking could not yet have removed it (`_start_allowance`). If the
+LP is still infeasible, it is relaxed in this order: (1) the start zone (two braking
+distances, `_start_zone`) gets the limits themselves (factors 1); (2) its rows become
+elastic (`lp.elastic`: slacks at a dominating cost, feasible whatever the start, exact
+where the hard LP is feasible). The sampled check judges every result as always. A
+moving start or seam that still fails goes, in this order, to: a smaller kept head of
+the last plan, a cold plan from the start state, then the caller (the engine's stop
+planner, counted as a fallback).
+
+Two more causes of failed or slow plans: a jerk pass that leaves a node far below its
+linearization point is re-linearized (RELINEARIZE_RATIO: the tangent pins it near 0,
+which made a 6.7 s window take 18 s), and at a C1 path's knots the checker's third
+difference adds KNOT_FD_SHARE |jump of x_ss| v^2 / dt to the jerk, which the jerk rows
+and the check now include (`knot_jumps`, `knot_fd_ratio`).
 """
 
 from __future__ import annotations
@@ -30,7 +50,13 @@ import numpy as np
 from lookahead.geometry.base import Path
 from lookahead.limits import AxisLimits
 from lookahead.planning.base import FeedProfile, PlanningError, PlanRequest, PlanResult
-from lookahead.planning.lp.envelope import braking_distance, path_limits, reachable_q
+from lookahead.planning.lp.elastic import elastic_lp
+from lookahead.planning.lp.envelope import (
+    braking_distance,
+    braking_q,
+    path_limits,
+    reachable_q,
+)
 from lookahead.planning.lp.grid import (
     build_grid,
     extend_grid,
@@ -54,6 +80,7 @@ from lookahead.planning.lp.rows import (
     free_rows,
     jerk_change_rows,
     jerk_rows,
+    start_jerk_rows,
     start_slope_row,
     velocity_caps,
 )
@@ -105,6 +132,71 @@ STALL_REF = 1e-3
 #: floor attempts in `_unstall` (each one 4x lower after an infeasible one)
 STALL_FLOOR_TRIES = 4
 
+#: `LPPlanner.brake_jerk`: the jerk (fraction of the path jerk along the start's tangent,
+#: `start_limits`) of the braking whose feed a moving start may keep above the LP's
+#: velocity caps (`_brake_room`): larger is a tighter room, which the LP's jerk rows (0.85
+#: of the limits, conservative) cannot follow at 1; smaller lets the plan stay at the
+#: limits longer. 0.5 measured on the random moving starts of tests/test_lp_feasibility.py
+#: (0.3 the same there) and the dwell layer's cascade (0 fallbacks)
+BRAKE_JERK = 0.5
+#: the start zone (`_start_zone`) has at least this many nodes and reaches this many
+#: braking distances from the start feed (1.0: a start accelerating at 0.9 of the cap
+#: conflicted with a repaired row just beyond the zone, tube-1450 s = 1806)
+START_ZONE_MIN = 8
+ZONE_REACH = 2.0
+#: a repair cuts the velocity factor by at least this (acceleration and jerk: 0.97): a
+#: velocity excess is the quintic rising ~1e-5 above a node's cap between nodes, and
+#: where the LP rides the brake room at the limits themselves (`_brake_room`) a 3 % cut
+#: made it infeasible (tube-1450, a start at 628 mm/s accelerating at 1735 mm/s^2)
+VEL_CUT = 0.998
+#: a jerk pass whose solution lies below 1 / RELINEARIZE_RATIO of its linearization point
+#: q* at some free node gets up to RELINEARIZE_EXTRA more passes, each linearized at the
+#: last solution: the tangent row at q* allows |jerk| <= J (3/2 - q/(2 q*)) sqrt(q/q*)
+#: at q, 0.15 J at q*/100, so a q* far above the solution pins the node near 0 (measured:
+#: the dwell layer through the engine, a seam linearized at the upper bounds left the
+#: nodes beside its dwell at 1-4 mm/s, intervals of 1-2.6 s, 18.0 s for a 6.7 s window)
+RELINEARIZE_RATIO = 10.0
+RELINEARIZE_EXTRA = 2
+#: ... when the intervals next to such nodes take more than this fraction of the pass's
+#: travel time (trades compute for time: on the fast corpus every pass for a smaller
+#: share gained < 0.1 % and tripled the replan p99 of c-corners-bspline-2d)
+RELINEARIZE_SHARE = 0.02
+#: ... on LPs of at most this many nodes: a pass of the ~10k-node whole-job LP of a CAM
+#: program costs 10-18 s of HiGHS (cam-fp-vonkarman whole job: 270 s against 7 s, 106.6 s
+#: of motion against 186.1 s); the service's windows have ~300-1000 nodes, the largest
+#: fast-corpus whole job 2215 (c-fourier-xc). Repairs get them too (without: c-corners
+#: +0.96 %, the butterfly 7.55 s against 6.74 s)
+RELINEARIZE_MAX_NODES = 4000
+
+
+def pinned_share(s: np.ndarray, q: np.ndarray, pinned: np.ndarray) -> float:
+    """Travel time (s) of the grid intervals with a pinned node at either end."""
+    if not np.any(pinned):
+        return 0.0
+    v = np.sqrt(np.maximum(q, 0.0))
+    vsum = v[:-1] + v[1:]
+    touch = pinned[:-1] | pinned[1:]
+    with np.errstate(divide="ignore"):
+        dt = np.where(vsum > 0, 2.0 * np.diff(s) / vsum, np.inf)
+    return float(np.sum(dt[touch]))
+
+
+#: `LPPlanner.objective` choices, and the floor (fraction of the peak q*) of q* in their
+#: weights (a node of q* ~ 0 would get an unbounded weight)
+OBJECTIVES = ("distance", "sqrt", "time", "time-late")
+OBJECTIVE_FLOOR = 1e-4
+
+
+def start_limits(geo: GridGeometry, limits: AxisLimits) -> tuple[float, float]:
+    """The path acceleration and jerk (path units / s^2, / s^3) the axis limits allow
+    along the tangent at the first node, min_k amax_k / |x'_k| and min_k jmax_k / |x'_k|
+    (the curvature terms aside): less conservative than `lp.envelope.path_limits`, which
+    assumes the worst tangent (tube-1450's strokes: 27700 against 19600 mm/s^3)."""
+    with np.errstate(divide="ignore"):
+        d1 = np.abs(geo.d1[0])
+        return float(np.min(limits.amax / d1)), float(np.min(limits.jmax / d1))
+
+
 def default_grid_step(path: Path, limits: AxisLimits, interval_s: float = 0.0045) -> float:
     """Grid spacing: the distance covered in `interval_s` at the fastest feed the axis
     velocity limits could allow (path units)."""
@@ -129,6 +221,58 @@ def c1_knot_caps(path: Path, s: np.ndarray, limits: AxisLimits, dt: float) -> np
         sl = slice(max(lo - 2, 0), min(lo + 2, s.size))
         caps[sl] = np.minimum(caps[sl], v)
     return caps
+
+
+#: the checker's third difference over samples dt apart of a step D in the axis
+#: acceleration (a C1 knot passed at feed v: D = |jump of x_ss| v^2) peaks at this times
+#: D / dt, for a step midway between two samples (the weights are theta^2 / 2,
+#: (1 + 2 theta - 2 theta^2) / 2, (1 - theta)^2 / 2 at a step theta of a sample step in)
+KNOT_FD_SHARE = 0.75
+
+
+def knot_jumps(path: Path, s: np.ndarray) -> np.ndarray | None:
+    """Per node (n, naxes): the largest |jump of x_ss| (axis units / path unit^2) of the
+    C1 knots within its neighbouring intervals (s_i-1, s_i+1), times KNOT_FD_SHARE;
+    None on a C2 path or where no knot lies inside."""
+    if path.continuity() >= 2:
+        return None
+    knots = path.breakpoints_s()
+    knots = knots[(knots > s[0]) & (knots < s[-1])]
+    if knots.size == 0:
+        return None
+    eps = 1e-7 * max(path.length, 1.0)
+    jump = np.abs(path.eval_s(knots + eps, 2)[2] - path.eval_s(knots - eps, 2)[2])
+    interval = np.clip(np.searchsorted(s, knots) - 1, 0, s.size - 2)
+    per_interval = np.zeros((s.size - 1, jump.shape[1]))
+    np.maximum.at(per_interval, interval, jump)
+    out = np.zeros((s.size, jump.shape[1]))
+    out[:-1] = per_interval
+    out[1:] = np.maximum(out[1:], per_interval)
+    return KNOT_FD_SHARE * out if np.any(out > 0.0) else None
+
+
+def knot_fd_ratio(path: Path, limits: AxisLimits, dt: float, s: np.ndarray,
+                  v: np.ndarray) -> np.ndarray | None:
+    """The checker's extra jerk at C1 knots over the jerk limit, at arc lengths s with
+    feed v (the analytic check sees only the smooth jerk between the knots): max over the
+    axes of KNOT_FD_SHARE |jump of x_ss| v^2 / (dt jmax) where a knot lies within two
+    samples (2 v dt) of s, else 0; None on a C2 path."""
+    if path.continuity() >= 2 or s.size == 0:
+        return None
+    knots = path.breakpoints_s()
+    knots = knots[(knots > s.min() - 1e-9) & (knots < s.max() + 1e-9)]
+    if knots.size == 0:
+        return None
+    eps = 1e-7 * max(path.length, 1.0)
+    jump = np.abs(path.eval_s(knots + eps, 2)[2] - path.eval_s(knots - eps, 2)[2])
+    per_knot = np.max(jump / limits.jmax, axis=1)
+    i = np.clip(np.searchsorted(knots, s), 1, knots.size - 1) if knots.size > 1 else \
+        np.zeros(s.size, dtype=int)
+    lo = np.maximum(i - 1, 0)
+    near_lo = np.abs(s - knots[lo]) <= 2.0 * v * dt
+    near_hi = np.abs(s - knots[i]) <= 2.0 * v * dt
+    worst = np.maximum(np.where(near_lo, per_knot[lo], 0.0), np.where(near_hi, per_knot[i], 0.0))
+    return KNOT_FD_SHARE * worst * v**2 / dt
 
 
 def worst_place(ratios: SampledRatios, profile: FeedProfile) -> tuple[str, float]:
@@ -162,7 +306,15 @@ class LPPlanner:
     linearization point beyond the reused nodes (default: the upper bounds there; the same
     times and failures measured, 2-4 ms less). seam_jerk_change: keep the jerk-change rows
     at a seam's first nodes (its head satisfies them). start_relief: nodes after a
-    moving start that get the limits themselves (`_relieve_start`).
+    moving start that get the limits themselves (`_relieve_start`). brake_jerk: the jerk
+    (fraction of the path jerk at the start) of the braking a moving start may keep above
+    the LP's velocity caps (`_brake_room`). elastic: last relaxation of an infeasible LP
+    from a moving start (`lp.elastic`; off: such a start fails, the caller falls back).
+    objective: the jerk passes' weights c of max c.q: "distance" (default, c = h),
+    "sqrt" (c = h / sqrt(q*)) or "time" (c = h / q*^(3/2), the gradient of the travel
+    time sum h / sqrt(q)) at the pass's linearization point q*, floored at
+    OBJECTIVE_FLOOR of its peak; "time-late": "time" only where q* is a jerk solution
+    (later passes, repairs), "distance" at the v+a solution (bench/lp_quality.py).
     """
 
     name = "lp"
@@ -186,8 +338,18 @@ class LPPlanner:
         seam_jerk_change: bool = True,
         stall_floor: float = 0.1,
         start_relief: int = 2,
+        brake_jerk: float = BRAKE_JERK,
+        elastic: bool = True,
+        objective: str = "distance",
     ) -> None:
+        if objective not in OBJECTIVES:
+            raise ValueError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
+        self.objective = objective
         self.start_relief = start_relief
+        self.brake_jerk = brake_jerk
+        self.elastic = elastic
+        self._elastic = 0  # nodes of the elastic start zone in the solve under way (0: none)
+        self._relaxed = 0  # nodes of the start zone at the limits themselves (0: none)
         self.stall_floor = stall_floor
         self.reuse = reuse
         self.seam_va_pass = seam_va_pass
@@ -336,8 +498,54 @@ class LPPlanner:
             head = seam.last.q[seam.first:seam.first + min(FIXED_NODES, seam.n_reuse)]
             q_star_head = self._seam_linearization(request, seam, s)
             a_start, t_cut = float(seam.last.a[seam.first]), seam.t_cut
-        plan = self.solve_grid(request, geo, tight, stop_idx, head, start_envelope=seam is None,
-                               q_star_head=q_star_head)
+        self._elastic = self._relaxed = 0
+        try:
+            return self._plan_grid(request, geo, tight, stop_idx, head, seam, q_star_head,
+                                   a_start, t_cut)
+        finally:
+            self._elastic = self._relaxed = 0
+
+    def _plan_grid(self, request: PlanRequest, geo: GridGeometry, tight: Tightening,
+                   stop_idx: np.ndarray, head: np.ndarray | None, seam: Seam | None,
+                   q_star_head: np.ndarray | None, a_start: float, t_cut: float
+                   ) -> PlanResult:
+        """`_plan` on its grid: the LP (elastic near a moving start if the LP is
+        infeasible, `_start_zone`), then the check/repair loop."""
+        s = geo.s
+        can_relax = seam is None and head is None and request.start.v > REST
+
+        def solve(**kw) -> GridPlan:
+            try:
+                return self.solve_grid(request, geo, tight, stop_idx, head,
+                                       start_envelope=seam is None, **kw)
+            except PlanningError:
+                if not can_relax or self._elastic:
+                    raise
+            # relaxation, in this order (module docstring): (1) the start zone gets the
+            # limits themselves (factors 1): the start state may come from a plan at the
+            # full limits (the heuristic's); (2) its rows become elastic (`lp.elastic`),
+            # a feasible LP whatever the start. (Dropping the jerk-change rows over the
+            # zone as well let the nodal jerk zig-zag: 3x jmax between the nodes.)
+            zone = self._start_zone(request, geo)
+            if not self._relaxed:
+                self._relaxed = zone
+                tight.acc[:zone] = 1.0
+                tight.jerk[:zone] = 1.0
+                try:
+                    return self.solve_grid(request, geo, tight, stop_idx, head,
+                                           start_envelope=True, **kw)
+                except PlanningError:
+                    if not self._use_elastic:
+                        raise
+            if not self._use_elastic:
+                raise PlanningError("lp: the LP from the moving start is infeasible")
+            self._elastic = zone
+            return self.solve_grid(request, geo, tight, stop_idx, head, start_envelope=True,
+                                   **kw)
+
+        plan = solve(q_star_head=q_star_head)
+        allowance = self._start_allowance(request, geo, tight) if seam is None else None
+        knotty = request.path.continuity() < 2
         repairs = 0
         worst = float("nan")
         trouble: list[float] = []  # where each repair round's worst excess was (s)
@@ -348,6 +556,14 @@ class LPPlanner:
                 break
             ratios = analytic_ratios(request.path, profile, request.limits, geo,
                                      self.check_step * request.dt)
+            if knotty:
+                s_t, v_t = profile.at(ratios.t_jerk)[:2]
+                extra = knot_fd_ratio(request.path, request.limits, request.dt, s_t, v_t)
+                if extra is not None:
+                    ratios = replace(ratios, jerk=ratios.jerk + extra)
+            if allowance is not None:
+                s_t = profile.at(ratios.t_vel)[0]
+                ratios = replace(ratios, vel=ratios.vel / np.interp(s_t, geo.s, allowance))
             if t_cut > 0.0:  # times on the un-cut profile, whose pieces are the intervals
                 ratios = replace(ratios, t_vel=ratios.t_vel + t_cut,
                                  t_acc=ratios.t_acc + t_cut, t_jerk=ratios.t_jerk + t_cut)
@@ -364,8 +580,7 @@ class LPPlanner:
                 raise exc
             trouble.append(worst_place(ratios, full)[1])
             self._tighten(tight, ratios, full, s, request.dt)
-            plan = self.solve_grid(request, geo, tight, stop_idx, head, start_q=plan.q,
-                                   passes=1, start_envelope=seam is None)
+            plan = solve(start_q=plan.q, passes=1)
             repairs += 1
         a_end = 0.0  # at rest, or at v_end with path acceleration 0
         self._last = LastPlan(request, geo, plan.q, node_accelerations(s, plan.q, a_start, a_end),
@@ -499,6 +714,8 @@ class LPPlanner:
         q_hi = np.minimum(self._caps(request, geo, tight),
                           self._envelope(request, geo, tight, stop_idx,
                                          include_start=start_envelope))
+        if start_envelope and fixed_head is None and request.start.v > REST:
+            q_hi = np.maximum(q_hi, self._brake_room(request, geo, tight))
         q_lo = np.zeros_like(q_hi)
         fixed = {0: request.start.v**2, geo.n_nodes - 1: request.v_end**2}
         fixed.update({int(i): 0.0 for i in stop_idx})
@@ -513,6 +730,8 @@ class LPPlanner:
             base.append(end_slope_row(geo, 0.0))
         if request.start.v > REST and fixed_head is None:
             base.append(start_slope_row(geo, request.start.a))
+            base.append(start_jerk_rows(geo, lim.jmax, float(tight.jerk[0]),
+                                        request.start.v, request.start.a))
         weight = np.gradient(geo.s)
         plan = GridPlan(geo.s, np.zeros(geo.n_nodes), np.inf)
         q_star = start_q
@@ -531,10 +750,18 @@ class LPPlanner:
             rest += list(range(self.free_start_nodes))
         rest = np.unique(np.array(rest, dtype=int))
         best_q, best_t = None, np.inf
-        for _ in range(passes or self.max_passes):
-            rows = [*base, jerk_rows(geo, lim.jmax, tight.jerk, q_star, q_floor),
+        n_passes = passes or self.max_passes
+        knot = knot_jumps(request.path, geo.s)
+        if knot is not None:
+            knot = knot / request.dt
+        free = np.ones(geo.n_nodes, dtype=bool)
+        free[list(fixed)] = False
+        k = 0
+        while True:
+            rows = [*base, jerk_rows(geo, lim.jmax, tight.jerk, q_star, q_floor, knot),
                     jerk_change_rows(geo, lim.jmax, q_star, q_floor, self.jerk_step, rest)]
-            q = self._solve(plan, weight, q_lo, q_hi, rows, geo.n_nodes, record=True)
+            q = self._solve(plan, self._pass_weight(weight, q_star, k > 0 or start_q is not None),
+                            q_lo, q_hi, rows, geo.n_nodes, record=True)
             for i, val in fixed.items():  # exactly, not to the solver's rounding
                 q[i] = val
             q = self._unstall(plan, weight, q, q_lo, q_hi, rows, fixed)
@@ -542,13 +769,34 @@ class LPPlanner:
             plan.pass_times.append(t)
             if t >= best_t * (1.0 - 1e-4):
                 break
-            best_q, best_t, q_star = q, t, q
+            used = np.maximum(q_star, q_floor)
+            pinned = free & (q * RELINEARIZE_RATIO < used)
+            best_q, best_t = q, t
+            # pinned nodes: the next tangent between the last point and the solution (a
+            # tangent at the solution itself allows at most 3x it: from below, a node
+            # near 0 would climb by 3x per pass)
+            q_star = np.where(pinned, np.sqrt(used * np.maximum(q, q_floor)), q)
+            k += 1
+            extra = (geo.n_nodes <= RELINEARIZE_MAX_NODES
+                     and pinned_share(geo.s, q, pinned) > RELINEARIZE_SHARE * t)
+            if k >= n_passes + (RELINEARIZE_EXTRA if extra else 0):
+                break
         if best_q is None:
             raise PlanningError("lp: the jerk LP has no solution")
         plan.q, plan.time_s = best_q, best_t
         return plan
 
     # --- internals --------------------------------------------------------------------
+    def _pass_weight(self, weight: np.ndarray, q_star: np.ndarray, at_jerk_solution: bool
+                     ) -> np.ndarray:
+        """A jerk pass's objective weights (`objective`), normalized to sum(weight)."""
+        if self.objective == "distance" or (self.objective == "time-late"
+                                            and not at_jerk_solution):
+            return weight
+        ref = np.maximum(q_star, OBJECTIVE_FLOOR * max(float(np.max(q_star)), 1e-300))
+        w = weight / (np.sqrt(ref) if self.objective == "sqrt" else ref**1.5)
+        return w * (float(np.sum(weight)) / float(np.sum(w)))
+
     def _unstall(self, plan: GridPlan, weight, q: np.ndarray, q_lo: np.ndarray,
                  q_hi: np.ndarray, rows: list[Rows], fixed: dict[int, float]) -> np.ndarray:
         """Re-solve if a free node got q = 0 (an unplanned stop; next to a rest node, an
@@ -608,6 +856,8 @@ class LPPlanner:
                record: bool) -> np.ndarray:
         lp = ScaledLP.build(weight, q_lo, q_hi, free_rows(Rows.stack(rows, n), q_lo >= q_hi),
                             nodes=plan.s)
+        if self._elastic:
+            lp, _ = elastic_lp(lp, self._elastic)
         t0 = time.perf_counter()
         out = self.backend.solve(lp)
         plan.solver_ms.append(1e3 * (time.perf_counter() - t0))
@@ -615,7 +865,23 @@ class LPPlanner:
         if not out.ok:
             raise PlacedPlanningError(f"lp: {self.solver} returned {out.status}",
                                       float(plan.s[0]))
-        return out.q
+        return out.q[:n]
+
+    @property
+    def _use_elastic(self) -> bool:
+        """The elastic relaxation is on, and the solver an LP solver: OSQP's proximal QP
+        pulls every variable towards its upper bound (`OsqpBackend`), a slack has none."""
+        return self.elastic and self.solver != "osqp"
+
+    def _start_zone(self, request: PlanRequest, geo: GridGeometry) -> int:
+        """Nodes of the start zone, whose rows are relaxed first to the limits, then
+        made elastic (`lp.elastic`), when the LP from a moving start is infeasible: those
+        within ZONE_REACH braking distances of the start feed at the path limits (where
+        the start state still shapes what the plan can do), at least START_ZONE_MIN."""
+        A, J = path_limits(request.path, request.limits)
+        reach = ZONE_REACH * braking_distance(float(request.start.v), A, J)
+        k = int(np.searchsorted(geo.s, geo.s[0] + reach, side="right"))
+        return int(min(max(k, START_ZONE_MIN), geo.n_nodes))
 
     def _caps(self, request: PlanRequest, geo: GridGeometry, tight: Tightening) -> np.ndarray:
         lim = request.limits
@@ -644,12 +910,79 @@ class LPPlanner:
         env = np.full(s.size, np.inf)
         if include_start:
             Jn, An = factors(s[0])
+            if a0 < 0.0 and request.start.v > REST:
+                # a braking start: an envelope that releases the braking more slowly than
+                # a0^2 / v0 would reach rest (or near it) first, and the LP with it; the
+                # state's own plan released faster (measured: the heuristic's brake at
+                # -2764 mm/s^2 from 300 mm/s, the 0.6 J envelope forced a stall)
+                Jn = max(Jn, a0 * a0 / request.start.v)
             env = reachable_q(s - s[0], request.start.v, a0, Jn, max(An, a0 + 1e-6 * abs(a0)))
         # the way into the end state (rest, or v_end with path acceleration 0) backwards
         env = np.minimum(env, reachable_q(s[-1] - s, request.v_end, 0.0, *factors(s[-1])))
         for i in stop_idx:
             env = np.minimum(env, reachable_q(np.abs(s - s[i]), 0.0, 0.0, *factors(s[i])))
         return env
+
+    def _brake_room(self, request: PlanRequest, geo: GridGeometry,
+                    tight: Tightening) -> np.ndarray:
+        """The room a moving start needs above the LP's velocity caps (q per node, path
+        units^2 / s^2): the feed of the jerk-limited braking from the start state at
+        `brake_jerk` x the path jerk (`lp.envelope.braking_q`), no higher than the velocity
+        limits themselves (factor 1, scaled by the repairs' tightening since: tight.vel /
+        the velocity margin) and the request's feed cap.
+
+        Why: the LP's caps are the limits times a margin (0.995), and a start state from
+        another plan (the heuristic's cruise, a plan at the full limits) can lie between
+        the two. From (v_cap, a = 0) the feed cannot fall to 0.995 v_cap within one node
+        (~6 mm) with a bounded jerk, yet the start slope row holds a = 0 at node 0: the
+        LP was infeasible (the cascade of issue 13: every window after a heuristic
+        fallback on the dwell layer). Under this room the braking itself is a feasible
+        way down (and cruising, where the limits allow it). Where the start is above the
+        limits themselves (an override) the room is that braking uncapped and the check
+        allows the excess (`_start_allowance`)."""
+        st = request.start
+        A, J = start_limits(geo, request.limits)
+        room = braking_q(geo.s - geo.s[0], st.v, st.a, self.brake_jerk * J, max(A, -st.a))
+        true = self._true_caps(request, geo)
+        factor = np.minimum(tight.vel / self.margins[0], 1.0)
+        # a start above the limits keeps the braking's excess over them (the check allows
+        # it, `_start_allowance`); elsewhere the room ends at the limits
+        if st.v**2 > true[0] * (1.0 + 1e-9):
+            return np.where(room > true, room, np.minimum(room, true * factor**2))
+        return np.minimum(room, true * factor**2)
+
+    def _start_allowance(self, request: PlanRequest, geo: GridGeometry,
+                         tight: Tightening) -> np.ndarray | None:
+        """For a start above the velocity limits (an override lowered them): the factor
+        (>= 1, per node) by which the check lets the feed exceed them: the start's own
+        excess v0 / v_cap, as far as a braking at half the room's jerk from the start
+        would still be above the limits (the LP's room, `_brake_room`, ends sooner), and
+        one node beyond; 1 elsewhere. None for a start within the limits. A plan from such
+        a start is never judged worse than the start is, nor for longer than a braking
+        slower than its own."""
+        st = request.start
+        if st.v <= REST:
+            return None
+        true = self._true_caps(request, geo)
+        if st.v**2 <= true[0] * (1.0 + 1e-9):
+            return None
+        A, J = start_limits(geo, request.limits)
+        slow = braking_q(geo.s - geo.s[0], st.v, st.a, 0.5 * self.brake_jerk * J,
+                         max(A, -st.a))
+        above = slow > true
+        above[1:] |= above[:-1].copy()
+        # (1 + 1e-6: the check evaluates the path at an interpolated u, `analytic_ratios`)
+        return np.where(above, (1.0 + 1e-6) * st.v / np.sqrt(true[0]), 1.0)
+
+    def _true_caps(self, request: PlanRequest, geo: GridGeometry) -> np.ndarray:
+        """q caps at the nodes from the request's limits themselves (no margin), the C1
+        knots and the feed cap."""
+        lim = request.limits
+        true = np.minimum(velocity_caps(geo, lim.vmax),
+                          c1_knot_caps(request.path, geo.s, lim, request.dt) ** 2)
+        if request.feed_cap is not None:
+            true = np.minimum(true, request.feed_cap.at(geo.s) ** 2)
+        return true
 
     def _pretighten(self, request: PlanRequest, geo: GridGeometry, tight: Tightening,
                     stop_idx: np.ndarray, first_free: int = 0) -> None:
@@ -692,14 +1025,14 @@ class LPPlanner:
                  s: np.ndarray, dt: float) -> None:
         """Scale the limits down around every time where one was exceeded."""
         t_nodes = profile.s_of_t.x - profile.s_of_t.x[0]
-        for arr, t_at, factors in ((ratios.vel, ratios.t_vel, tight.vel),
-                                   (ratios.acc, ratios.t_acc, tight.acc),
-                                   (ratios.jerk, ratios.t_jerk, tight.jerk)):
+        for arr, t_at, factors, cut in ((ratios.vel, ratios.t_vel, tight.vel, VEL_CUT),
+                                        (ratios.acc, ratios.t_acc, tight.acc, 0.97),
+                                        (ratios.jerk, ratios.t_jerk, tight.jerk, 0.97)):
             bad = np.nonzero(arr > 1.0)[0]
             if bad.size == 0:
                 continue
             node = np.clip(np.searchsorted(t_nodes, t_at[bad]) - 1, 0, s.size - 1)
-            shrink = np.clip(0.98 / arr[bad], 0.6, 0.97)
+            shrink = np.clip(cut / arr[bad], 0.6, cut)
             per_node = np.ones(s.size)
             for i, f in zip(node, shrink, strict=True):
                 sl = slice(max(i - 2, 0), min(i + 4, s.size))

@@ -229,6 +229,25 @@ def start_slope_row(geo: GridGeometry, a0: float) -> Rows:
     return Rows(sp.csr_matrix(A), np.array([a0]), np.array([a0]))
 
 
+def start_jerk_rows(geo: GridGeometry, jmax: np.ndarray, scale: float, v0: float,
+                    a0: float) -> Rows:
+    """The axis jerk at the first node of a moving start, x''' v0^3 + 3 x'' v0 a0 + x' j0,
+    within +-scale jmax, with the path jerk j0 = v0 q''/2 and q'' of the quadratic
+    through nodes 0, 1, 2 (the one `start_slope_row` takes its slope from): exact and
+    linear, as v0 and a0 are given (no tangent). Without it the first interval's jerk was
+    bounded by nothing but node 1's row: its quintic reached 4.6 jmax at t = 0 from
+    (628 mm/s, +1735 mm/s^2) on tube-1450, where the heuristic planned 0.998."""
+    n = geo.n_nodes
+    h1, h2 = geo.s[1] - geo.s[0], geo.s[2] - geo.s[1]
+    w2 = 2.0 * np.array([1.0 / (h1 * (h1 + h2)), -1.0 / (h1 * h2), 1.0 / (h2 * (h1 + h2))])
+    k = geo.d1.shape[1]
+    A = np.zeros((k, n))
+    A[:, :3] = 0.5 * v0 * geo.d1[0, :, None] * w2[None, :]
+    g = geo.d3[0] * v0**3 + 3.0 * geo.d2[0] * v0 * a0
+    J = scale * jmax
+    return Rows(sp.csr_matrix(A), -J - g, J - g)
+
+
 def end_slope_row(geo: GridGeometry, a_end: float) -> Rows:
     """q'(s_N) / 2 = a_end: the plan ends with path acceleration a_end (backward slope)."""
     n = geo.n_nodes
@@ -250,11 +269,16 @@ def jerk_operator(geo: GridGeometry, axis: int) -> tuple[np.ndarray, np.ndarray]
 
 
 def jerk_rows(
-    geo: GridGeometry, jmax: np.ndarray, scale: np.ndarray, q_star: np.ndarray, q_floor: float
+    geo: GridGeometry, jmax: np.ndarray, scale: np.ndarray, q_star: np.ndarray, q_floor: float,
+    knot: np.ndarray | None = None,
 ) -> Rows:
     """Tangent rows +-sqrt(q*_i) L_k(q) + J q_i / (2 q*_i) <= 3/2 J at the interior nodes.
 
     J = scale_i jmax_k; q* is floored at q_floor (a tangent at 0 does not exist).
+    knot: per node and axis (n, naxes), the checker's extra jerk per unit q at a C1 knot
+    nearby (`lp.planner.knot_jumps` / dt, s^-1 / path unit^2 ...): the row then bounds
+    |jerk| + knot q by J, the tangent of the convex J / sqrt(q) - knot sqrt(q) at q*:
+    +-sqrt(q*) L + (J / (2 q*) + knot / 2) q <= 3/2 J - knot q* / 2 (conservative).
     """
     n = geo.n_nodes
     qs = np.maximum(q_star, q_floor)
@@ -263,11 +287,13 @@ def jerk_rows(
         coef, nodes = jerk_operator(geo, k)
         J = jmax[k] * scale[nodes]
         root = np.sqrt(qs[nodes])[:, None]
+        kc = np.zeros(nodes.size) if knot is None else knot[nodes, k]
         for sign in (1.0, -1.0):
             c = sign * root * coef
-            c[:, 1] += J / (2.0 * qs[nodes])
-            parts.append(Rows(_tridiagonal(c, nodes, n), np.full(nodes.size, -np.inf), 1.5 * J))
-    parts.append(midpoint_jerk_rows(geo, jmax, scale, qs, q_floor))
+            c[:, 1] += J / (2.0 * qs[nodes]) + 0.5 * kc
+            parts.append(Rows(_tridiagonal(c, nodes, n), np.full(nodes.size, -np.inf),
+                              1.5 * J - 0.5 * kc * qs[nodes]))
+    parts.append(midpoint_jerk_rows(geo, jmax, scale, qs, q_floor, knot))
     return Rows.stack(parts, n)
 
 
@@ -297,7 +323,8 @@ def midpoint_operators(geo: GridGeometry) -> tuple[np.ndarray, np.ndarray, np.nd
 
 
 def midpoint_jerk_rows(geo: GridGeometry, jmax: np.ndarray, scale: np.ndarray,
-                       qs: np.ndarray, q_floor: float) -> Rows:
+                       qs: np.ndarray, q_floor: float, knot: np.ndarray | None = None
+                       ) -> Rows:
     """The tangent jerk rows of `jerk_rows` at the interval midpoints (issue 13): the
     nodal rows alone let the LP cancel a large geometric jerk x_sss v^3 with the path
     jerk x_s j exactly at the nodes where x_sss changes sign between them (a sharp bend
@@ -306,7 +333,8 @@ def midpoint_jerk_rows(geo: GridGeometry, jmax: np.ndarray, scale: np.ndarray,
     rows repaired). q = 0 satisfies these rows as well (feasibility is unchanged).
     qs: the linearization point at the nodes (floored); at a midpoint, the mean of its
     nodes'. J is the larger of the two nodes' scale times jmax (the smaller made 10 of
-    test_lp_planner's 60 moving starts infeasible: `_relieve_start` relieves node 1 only)."""
+    test_lp_planner's 60 moving starts infeasible: `_relieve_start` relieves node 1 only).
+    knot: as in `jerk_rows`, the larger of the interval's two nodes' values."""
     n = geo.n_nodes
     if geo.mid is None or n < 4:
         return Rows(sp.csr_matrix((0, n)), np.empty(0), np.empty(0))
@@ -320,10 +348,12 @@ def midpoint_jerk_rows(geo: GridGeometry, jmax: np.ndarray, scale: np.ndarray,
     for k in range(geo.d1.shape[1]):
         L = m3[:, k, None] * Q + 1.5 * m2[:, k, None] * DQ + 0.5 * m1[:, k, None] * DDQ
         J = jmax[k] * sj
+        kc = np.zeros(j.size) if knot is None else np.maximum(knot[j, k], knot[j + 1, k])
         for sign in (1.0, -1.0):
-            c = sign * root * L + (J / (2.0 * qm))[:, None] * Q
+            c = sign * root * L + (J / (2.0 * qm) + 0.5 * kc)[:, None] * Q
             parts.append(Rows(banded(c[known], j[known] - 1, n),
-                              np.full(int(known.sum()), -np.inf), 1.5 * J[known]))
+                              np.full(int(known.sum()), -np.inf),
+                              (1.5 * J - 0.5 * kc * qm)[known]))
     return Rows.stack(parts, n)
 
 

@@ -2,8 +2,9 @@
 
 Both backends see the same well-scaled problem: each variable is divided by its upper
 bound (z = q / q_cap, so 0 <= z <= 1) and each row by its largest coefficient. HiGHS
-solves the pure LP; OSQP solves a strongly convex proximal QP with the same optimum on
-rows renormalized to unit bounds (`OsqpBackend`).
+solves the pure LP; OSQP solves a strongly convex proximal QP (re-centred towards the LP's
+optimum) on rows renormalized to unit bounds and rewritten on finite differences of z
+(`osqp_lift`), and its answer is judged on the rows themselves (`OsqpBackend`).
 """
 
 from __future__ import annotations
@@ -13,9 +14,21 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from lookahead.planning.lp.osqp_lift import Lifted, lift_rows
 from lookahead.planning.lp.rows import Rows
 
 SOLVERS = ("osqp", "highs", "highs-milp")
+#: OSQP statuses that certify infeasibility (primal, primal inaccurate): no retry
+_INFEASIBLE = (3, 4)
+#: ADMM iterations between rho updates (fixed: reproducible answers; 25 is OSQP's check
+#: interval, measured like the time-based default on the captured windows' iterations)
+ADAPTIVE_RHO_INTERVAL = 25
+#: the retry's eps_abs as a fraction of the first attempt's
+RETRY_EPS = 0.2
+#: proximal-point re-solves stop when the LP objective gains less than this (relative),
+#: and each gets at most PROX_MAX_ITER ADMM iterations (it starts at the last answer)
+PROX_GAIN = 1e-4
+PROX_MAX_ITER = 2000
 
 
 @dataclass
@@ -130,60 +143,88 @@ class _OsqpMemory:
     keys: np.ndarray
     y_rows: np.ndarray
     rho: float
+    #: duals of the lifted difference chain (`osqp_lift`; empty without the lift)
+    y_chain: np.ndarray
 
 
 class OsqpBackend:
-    """OSQP on the scaled problem made strongly convex, warm-started from the last solve.
+    """OSQP on the scaled problem, lifted, made strongly convex, warm-started.
 
-    The LP optimum sits at a degenerate vertex where ADMM crawls (20000+ iterations
-    measured), so OSQP solves the proximal QP
+    The LP optimum sits at a degenerate vertex where ADMM crawls, so OSQP solves the
+    proximal QP
 
-        min  c.z + (mu / 2) ||z - z_upper||^2   s.t. bounds and rows (z = q / q_scale)
+        min  c.z + (mu / 2) ||z - z_c||^2   s.t. bounds and rows (z = q / q_scale)
 
-    whose optimum matches the LP's on the feed problems measured (the feasible set has a
-    greatest element, which both objectives pick for any mu >= 0; objective gap <= 1.2e-4
-    on tube-1450). Rows are normalized to unit bounds (`bound_normalized_rows`) so eps is
-    a fraction of each limit; shrink > 0 solves each inequality that far inside its bound,
-    so that an answer within OSQP's tolerance still meets the row itself.
+    first with the centre z_c at the upper bounds, then (`prox_steps`, proximal point)
+    re-centred at its own answer with mu * prox_mu, warm, until the LP objective gains less
+    than PROX_GAIN: the centre at z_upper alone left a 12 % objective gap on
+    c-short-xy-0p5mm (the feasible set has no greatest element once jerk rows bind).
+    Rows are normalized to unit bounds (`bound_normalized_rows`) so eps is a fraction of
+    each limit, and rewritten on finite differences of z (`osqp_lift`, `lift`): on the
+    rows as built, no setting converged on the first jerk pass of cold windows (jerk-change
+    rows ~ third differences of z bounded at ~1e-4); lifted, most windows converge. eps_rel
+    is 0: OSQP's relative tolerance scales with |A x|, which the weighted chain rows make
+    large (answers "solved" 10 % outside a row, measured).
 
     Warm start: primal AND dual of the last accepted solve. Default: when this problem has
     the last one's size (the re-solves of one window: `_unstall`, repairs). map_windows:
     also across windows, mapped onto this problem's variables by node position s
     (`ScaledLP.nodes`: a seam reuses the last grid's nodes) and onto its rows by
     `row_keys`; fresh nodes start at their lower bound (fresh_at_upper: upper) with dual 0.
-    Off by default: measured on w-hoop-R40-band8-2mm through the engine, mapped starts
-    ended 2 % faster plans (5.82 s against 5.94 s of motion) but took ~5x the compute (the
-    ADMM iterations to eps grew), on the same fallbacks (0). warm_rho: start at the last
-    solve's final rho (off: with `shrink` it made the same path ~6x slower, 563k ADMM
-    iterations in 46 solves).
+    Off by default (measured before the lift on w-hoop-R40-band8-2mm: 2 % faster plans
+    for ~5x the compute). warm_rho: start at the last solve's final rho (off).
 
-    Acceptance: the answer is clipped to the bounds and accepted if OSQP converged and no
-    row is exceeded by more than `accept_violation` of its bound (accept_iterate: also an
-    iterate stopped by max_iter that meets the rows, a feasible, maybe slower, plan); the
-    planner's sampled check judges it like any other. `LPOutcome.ok` is False otherwise.
-    shrink and accept_iterate are off by default: on w-hoop-R40-band8-2mm they changed
-    neither the plan nor the fallbacks (measured side by side, 22:27 snapshot of the
-    other LP modules).
+    Acceptance (`_judge`): OSQP's answer z (clipped to the bounds) is judged on the rows
+    themselves. Rows are split into the jerk-change regularizer (`regularizer_rows`) and
+    the limit rows (velocity bounds, acceleration, jerk). From rest to rest (z = 0
+    feasible) an answer within `pull_violation` of the limit rows is scaled onto them
+    (`_pull_inside`: exactly feasible, ~excess slower). Accepted: no infeasibility
+    certificate, limit rows within `accept_violation` (plans are made at the limits times
+    the machine's margin, 0.98, so 1.5 % over a row stays inside the limit), jerk-change
+    rows within `soft_violation` times their bound, and OSQP converged or (accept_iterate)
+    stopped at max_iter. A refused answer gets one retry (`retry`) from where it stopped,
+    at eps * RETRY_EPS. The planner's sampled check then judges the profile like any
+    other; `LPOutcome.ok` is False otherwise. Tolerances measured on the 14 fast-corpus
+    paths (bench/results/corpus_osqp_lift.json): 5e-3 / 1.0 left 3 paths with fallbacks
+    (cam-style-R50-a45-L200, c-fourier-xc-3000pts, n-butterfly), 1.5e-2 / 2.0 two
+    (cam-style planned with 0), inf for the jerk-change rows the same two and cam-style
+    44 % slower (zig-zag jerk, repairs).
 
-    mu: proximal weight (scaled units). eps: OSQP eps_abs = eps_rel. bound_floor: see
-    `bound_normalized_rows`. shrink: the inequality margin in unit-bound row units (2e-3
-    is about OSQP's residual at eps = 1e-3 on rows of unit scale; rows narrower than 4x it
-    keep their bounds).
+    mu: proximal weight (scaled units). eps: OSQP eps_abs. bound_floor: see
+    `bound_normalized_rows`. shrink: the inequality margin in unit-bound row units (off).
     """
 
     def __init__(
         self,
         mu: float = 10.0,
         eps: float = 1e-3,
-        max_iter: int = 20000,
+        max_iter: int = 10000,
         bound_floor: float = 1e-3,
-        accept_violation: float = 5e-3,
+        accept_violation: float = 1.5e-2,
         shrink: float = 0.0,
-        accept_iterate: bool = False,
+        accept_iterate: bool = True,
         map_windows: bool = False,
         fresh_at_upper: bool = False,
         warm_rho: bool = False,
+        lift: bool = True,
+        polish: bool = True,
+        eps_rel: float | None = 0.0,
+        chain_weight: bool = True,
+        retry: bool = True,
+        pull_violation: float = 5e-2,
+        soft_violation: float = 2.0,
+        prox_steps: int = 3,
+        prox_mu: float = 0.1,
     ) -> None:
+        self.prox_mu = prox_mu
+        self.prox_steps = prox_steps
+        self.soft_violation = soft_violation
+        self.pull_violation = pull_violation
+        self.retry = retry
+        self.eps_rel = eps if eps_rel is None else eps_rel
+        self.chain_weight = chain_weight
+        self.lift = lift
+        self.polish = polish
         self.warm_rho = warm_rho
         self.accept_iterate = accept_iterate
         self.map_windows = map_windows
@@ -205,58 +246,131 @@ class OsqpBackend:
         wide = (row_hi - row_lo) > 4.0 * self.shrink
         lo_in = np.where(wide & np.isfinite(row_lo), row_lo + self.shrink, row_lo)
         hi_in = np.where(wide & np.isfinite(row_hi), row_hi - self.shrink, row_hi)
-        A = sp.vstack([sp.identity(n, format="csc"), rows], format="csc")
+        lifted = lift_rows(rows.tocsr(), chain_weight=self.chain_weight) if self.lift else None
+        N = lifted.size if lifted is not None else n
+        eye = sp.eye(n, N, format="csc")
+        if lifted is not None:
+            A = sp.vstack([eye, lifted.rows, lifted.chain], format="csc")
+            zeros = np.zeros(lifted.chain.shape[0])
+            lo = np.concatenate([lp.lower, lo_in, zeros])
+            hi = np.concatenate([lp.upper, hi_in, zeros])
+        else:
+            A = sp.vstack([eye, rows], format="csc")
+            lo = np.concatenate([lp.lower, lo_in])
+            hi = np.concatenate([lp.upper, hi_in])
         infinity = osqp.constant("OSQP_INFTY")
-        lo = np.concatenate([lp.lower, lo_in])
-        hi = np.concatenate([lp.upper, hi_in])
         lo = np.where(np.isfinite(lo), lo, -infinity)
         hi = np.where(np.isfinite(hi), hi, infinity)
-        P = sp.diags(np.full(n, self.mu), format="csc")
+        diag = np.arange(n)
+        P = sp.csc_matrix((np.full(n, self.mu), (diag, diag)), shape=(N, N))  # z only
+        cost = np.r_[lp.cost - self.mu * lp.upper, np.zeros(N - n)]
         memory = self._memory
-        settings = {"verbose": False, "eps_abs": self.eps, "eps_rel": self.eps,
-                    "max_iter": self.max_iter, "polishing": True, "adaptive_rho": True}
+        settings = {"verbose": False, "eps_abs": self.eps, "eps_rel": self.eps_rel,
+                    "max_iter": self.max_iter, "polishing": self.polish, "adaptive_rho": True,
+                    # rho updates every ADAPTIVE_RHO_INTERVAL iterations, not OSQP's
+                    # default (a fraction of the measured setup time), which made the
+                    # answers, and whole plans, depend on the machine's load
+                    "adaptive_rho_interval": ADAPTIVE_RHO_INTERVAL}
         if memory is not None and z0 is None and self.warm_rho:
             settings["rho"] = memory.rho
         solver = osqp.OSQP()
-        solver.setup(P, lp.cost - self.mu * lp.upper, A, lo, hi, **settings)
+        solver.setup(P, cost, A, lo, hi, **settings)
         keys = row_keys(rows.tocsr(), lp.nodes) if lp.nodes is not None else None
-        self._warm_start(solver, lp, keys, z0)
+        self._warm_start(solver, lp, keys, z0, lifted, A.shape[0])
         res = solver.solve(raise_error=False)
-        converged = res.info.status_val in (1, 2)  # solved, solved inaccurate
-        z = np.asarray(res.x, dtype=float) if res.x is not None else np.zeros(n)
-        z = np.clip(np.nan_to_num(z), lp.lower, lp.upper)
-        excess = _worst_excess(rows, row_lo, row_hi, z)
-        finite = res.x is not None and np.all(np.isfinite(res.x))
-        ok = finite and excess <= self.accept_violation and (converged or self.accept_iterate)
+        iterations = int(res.info.iter)
+        z, excess, converged, ok = self._judge(res, lp, rows, row_lo, row_hi)
+        if not ok and self.retry and res.info.status_val not in _INFEASIBLE:
+            # once more from where it stopped (OSQP keeps its iterate), to a tighter
+            # tolerance and for longer: most answers refused for their row excess, and
+            # most stopped by max_iter, then pass (captured fast-corpus windows)
+            solver.update_settings(eps_abs=self.eps * RETRY_EPS, max_iter=self.max_iter)
+            res = solver.solve(raise_error=False)
+            iterations += int(res.info.iter)
+            z, excess, converged, ok = self._judge(res, lp, rows, row_lo, row_hi)
+        if ok and self.prox_steps:
+            solver.update_settings(max_iter=PROX_MAX_ITER)
+        for _ in range(self.prox_steps if ok else 0):
+            # proximal point: the same QP centred at the accepted answer instead of the
+            # upper bounds, warm (OSQP keeps x and y). The centre at z_upper pulls the
+            # QP's optimum off the LP's where the feasible set has no greatest element
+            # (measured: 12 % objective gap on c-short-xy-0p5mm)
+            mu = self.mu * self.prox_mu
+            solver.update(q=np.r_[lp.cost - mu * z, np.zeros(N - n)],
+                          Px=np.full(n, mu))
+            again = solver.solve(raise_error=False)
+            iterations += int(again.info.iter)
+            z2, excess2, converged2, ok2 = self._judge(again, lp, rows, row_lo, row_hi)
+            if not ok2 or float(lp.cost @ z2) >= float(lp.cost @ z) - PROX_GAIN * abs(
+                    float(lp.cost @ z)):
+                if ok2 and float(lp.cost @ z2) < float(lp.cost @ z):
+                    res, z, excess, converged = again, z2, excess2, converged2
+                break
+            res, z, excess, converged = again, z2, excess2, converged2
         if ok and res.y is not None and np.all(np.isfinite(res.y)):
             y = np.asarray(res.y, dtype=float)
+            m = rows.shape[0]
             nodes = lp.nodes if lp.nodes is not None else np.arange(n, dtype=float)
             self._memory = _OsqpMemory(
                 nodes, z * lp.q_scale, y[:n],
-                keys if keys is not None else np.empty((0, 3)), y[n:],
-                float(getattr(res.info, "rho_estimate", 0.1) or 0.1))
+                keys if keys is not None else np.empty((0, 3)), y[n:n + m],
+                float(getattr(res.info, "rho_estimate", 0.1) or 0.1), y[n + m:])
         status = (f"{res.info.status}{'' if converged else ' (iterate accepted)' if ok else ''}"
-                  f" (worst row excess {excess:.1e} of its bound)")
-        return LPOutcome(z * lp.q_scale, ok, status, int(res.info.iter))
+                  f" (worst row excess {excess:.1e} of its bound, jerk-change rows "
+                  f"{self._soft_excess(rows, row_lo, row_hi, z):.1e})")
+        return LPOutcome(z * lp.q_scale, ok, status, iterations)
+
+    def _soft_excess(self, rows: sp.csc_matrix, row_lo: np.ndarray, row_hi: np.ndarray,
+                     z: np.ndarray) -> float:
+        """The jerk-change rows' worst excess relative to their bound (`regularizer_rows`)."""
+        soft = regularizer_rows(rows, row_lo, row_hi)
+        return _relative_excess(rows[soft], row_hi[soft], z)
+
+    def _judge(self, res, lp: ScaledLP, rows: sp.csc_matrix, row_lo: np.ndarray,
+               row_hi: np.ndarray) -> tuple[np.ndarray, float, bool, bool]:
+        """(z clipped to the bounds, its worst row excess, converged, accepted)."""
+        n = lp.cost.size
+        converged = res.info.status_val in (1, 2)  # solved, solved inaccurate
+        finite = res.x is not None and bool(np.all(np.isfinite(res.x)))
+        z = np.asarray(res.x[:n], dtype=float) if res.x is not None else np.zeros(n)
+        z = np.clip(np.nan_to_num(z), lp.lower, lp.upper)
+        soft = regularizer_rows(rows, row_lo, row_hi)
+        hard, lo_h, hi_h = rows[~soft], row_lo[~soft], row_hi[~soft]
+        excess = _worst_excess(hard, lo_h, hi_h, z)
+        certified = res.info.status_val in _INFEASIBLE
+        if (finite and not certified and excess > 0.0 and excess <= self.pull_violation
+                and (converged or self.accept_iterate)):
+            z, excess = _pull_inside(hard, lo_h, hi_h, lp.lower, z, excess)
+        soft_ok = (not np.isfinite(self.soft_violation)
+                   or _relative_excess(rows[soft], row_hi[soft], z) <= self.soft_violation)
+        ok = (finite and excess <= self.accept_violation and soft_ok and not certified
+              and (converged or self.accept_iterate))
+        return z, excess, converged, ok
 
     def _warm_start(self, solver, lp: ScaledLP, keys: np.ndarray | None,
-                    z0: np.ndarray | None) -> None:
-        """Primal and dual start (see the class docstring)."""
+                    z0: np.ndarray | None, lifted: Lifted | None, m_all: int) -> None:
+        """Primal and dual start (see the class docstring); with the lift, the
+        differences of the primal start and the last chain duals when the sizes agree."""
+        def extend(z: np.ndarray) -> np.ndarray:
+            return lifted.extend(z) if lifted is not None else z
+
         if z0 is not None:
-            solver.warm_start(x=np.clip(z0, lp.lower, lp.upper))
+            solver.warm_start(x=extend(np.clip(z0, lp.lower, lp.upper)))
             return
         mem = self._memory
         if mem is None:
             return
         n = lp.cost.size
-        m = solver.m - n if hasattr(solver, "m") else None
+        chain = np.zeros(lifted.chain.shape[0] if lifted is not None else 0)
+        m_rows = m_all - n - chain.size
         if (not self.map_windows or lp.nodes is None or keys is None
                 or mem.keys.size == 0):
             if mem.q.size != n:
                 return
-            x = np.clip(mem.q / lp.q_scale, lp.lower, lp.upper)
-            if m is not None and mem.y_rows.size == m:
-                solver.warm_start(x=x, y=np.concatenate([mem.y_bounds, mem.y_rows]))
+            x = extend(np.clip(mem.q / lp.q_scale, lp.lower, lp.upper))
+            if mem.y_rows.size == m_rows and mem.y_chain.size == chain.size:
+                solver.warm_start(x=x, y=np.concatenate([mem.y_bounds, mem.y_rows,
+                                                         mem.y_chain]))
             else:
                 solver.warm_start(x=x)
             return
@@ -273,7 +387,54 @@ class OsqpBackend:
         y_r = np.zeros(keys.shape[0])
         new, old = _match(keys, mem.keys)
         y_r[new] = mem.y_rows[old]
-        solver.warm_start(x=x, y=np.concatenate([y_b, y_r]))
+        solver.warm_start(x=extend(x), y=np.concatenate([y_b, y_r, chain]))
+
+
+def regularizer_rows(A: sp.csc_matrix, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Rows that look like `lp.rows.jerk_change_rows`: four neighbouring columns, bounds
+    symmetric and finite. (Acceleration rows are symmetric on three columns, nodal jerk
+    rows one-sided on three, midpoint jerk rows one-sided on four.) They are the LP's
+    regularizer against zig-zag jerk, not a machine limit; the planner's sampled check
+    judges the profile either way."""
+    R = A.tocsr()
+    counts = np.diff(R.indptr)
+    span = np.zeros(R.shape[0], dtype=int)
+    filled = counts > 0
+    if R.nnz:
+        starts = R.indptr[:-1][filled]
+        span[filled] = (np.maximum.reduceat(R.indices, starts)
+                        - np.minimum.reduceat(R.indices, starts) + 1)
+    symmetric = np.isfinite(lower) & np.isfinite(upper) & (upper > 0) & \
+        np.isclose(lower, -upper, rtol=1e-9, atol=0.0)
+    return (span == 4) & symmetric
+
+
+def _relative_excess(A: sp.csc_matrix, bound: np.ndarray, z: np.ndarray) -> float:
+    """Largest (|A z| - bound) / bound of symmetric rows |A z| <= bound (0 when inside)."""
+    if A.shape[0] == 0:
+        return 0.0
+    return float(max(np.max((np.abs(A @ z) - bound) / bound), 0.0))
+
+
+def _pull_inside(A: sp.csc_matrix, lower: np.ndarray, upper: np.ndarray,
+                 z_lower: np.ndarray, z: np.ndarray, excess: float) -> tuple[np.ndarray, float]:
+    """z scaled down by the largest t <= 1 that brings every row inside its bounds, and its
+    worst excess, when z = 0 meets the rows and bounds (every row's bounds hold 0, every
+    variable's lower bound is 0: a job from rest to rest, the fixed nodes at q = 0). The
+    rows are linear and homogeneous in q (acceleration, linearized jerk, jerk change,
+    slopes at rest), so t z meets any row z exceeds once t <= bound / value; q t is ~t
+    slower where it binds and no slower where rows are slack, i.e. the plan loses about
+    `excess` of its speed. Else z and `excess` unchanged (the acceptance rule decides)."""
+    if np.any(z_lower > 0.0) or np.any(lower > 0.0) or np.any(upper < 0.0):
+        return z, excess
+    Az = A @ z
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_hi = np.where(Az > upper, upper / Az, 1.0)
+        t_lo = np.where(Az < lower, lower / Az, 1.0)
+    t = float(min(np.min(t_hi, initial=1.0), np.min(t_lo, initial=1.0)))
+    t = max(0.0, t * (1.0 - 1e-12))
+    z = z * t
+    return z, _worst_excess(A, lower, upper, z)
 
 
 def _worst_excess(A: sp.csc_matrix, lower: np.ndarray, upper: np.ndarray,

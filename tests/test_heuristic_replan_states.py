@@ -1,0 +1,62 @@
+"""Heuristic replans from states on its own plan (issues 13 and 14): the service replans
+from wherever its last plan is, so every state of a heuristic plan must be a start the
+heuristic plans from. Here: the braking to rest at the end of the butterfly's first window
+under feed-level budgets, where a replan's grid samples the path at other points than the
+plan's, so the start lies a hair outside the replan's own fastest braking
+(`scan._land_in_first`; before it: "no free-junction chain" for every layout)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from bench.corpus import load_corpus
+
+from lookahead.planning.base import PathState, PlanningError, PlanRequest
+from lookahead.stream.engine import horizon_length
+from lookahead.stream.planners import make_planner
+from lookahead.stream.plans import CommittedPlan, plan_checked
+
+#: share of the first plan's duration at its end replanned from (its braking to rest)
+END_SHARE = 0.02
+
+
+@pytest.fixture(scope="module")
+def butterfly_end():
+    """(corpus path, geometry path, limits, window, feed cap, committed first plan, the
+    sample indices of the braking at its end)."""
+    p = load_corpus("fast", pattern="n-butterfly")[0]
+    cfg, m = p.config, p.config.machine
+    path = p.path()
+    cap = p.geometry().feed_cap()
+    lim = m.limits.scaled(cfg.planner.margin)
+    window = horizon_length(lim, np.asarray(m.path_scale, float), cfg.planner.horizon_s)
+    request = PlanRequest(path, lim, PathState(0.0), min(path.length, window), 0.0, cap,
+                          m.dt)
+    first = make_planner("heuristic").plan(request)
+    base = CommittedPlan.anchor(path, first, 0, m.dt)
+    n = int(first.profile.duration / m.dt)
+    ks = np.arange(int((1.0 - END_SHARE) * n), n - 1)
+    return p, path, lim, window, cap, base, ks
+
+
+def test_replans_from_the_braking_to_rest_at_the_window_end(butterfly_end):
+    """Every sample of the first plan's braking to rest (it ends the path) is a start the
+    heuristic replans from, and the engine's check (continuity with the samples already
+    published, the independent checker at the limits) accepts the replan."""
+    p, path, lim, window, cap, base, ks = butterfly_end
+    m = p.config.machine
+    failed, moving = [], 0
+    for k in ks:
+        st = base.state(int(k), m.dt)
+        if st.s >= path.length - 1e-9 * path.length:
+            continue
+        moving += st.v > 0
+        tail = base.samples(max(int(k) - 2, 0), min(int(k), 2) + 1, m.dt).pos
+        request = PlanRequest(path, lim, st, min(path.length, st.s + window), 0.0, cap,
+                              m.dt)
+        try:
+            plan_checked(make_planner("heuristic"), request, int(k), tail, m.limits)
+        except (PlanningError, ValueError, RuntimeError, ArithmeticError) as exc:
+            failed.append((int(k), st, str(exc)[:120]))
+    assert moving > 50  # the braking is sampled, not just the rest at its end
+    assert not failed, failed[:3]
