@@ -71,10 +71,10 @@ def run_path(p, method: str, n_states: int, seed: int, mode: str = "seamed") -> 
     failures, times = [], []
     states = states_on(first.profile, n_states, rng)
     for t, st in states:
-        if st.s >= path.length - S_TOL * max(path.length, 1.0):
-            continue  # at the path's end: the engine asks for no replan (its tolerance)
         k = round(t / m.dt)
         st = base.state(k, m.dt)  # the engine replans from a sample of its plan
+        if st.s >= path.length - S_TOL * max(path.length, 1.0):
+            continue  # at the path's end: the engine asks for no replan (its tolerance)
         tail = base.samples(max(k - 2, 0), min(k, 2) + 1, m.dt).pos  # published k-2..k
         request = PlanRequest(path, lim, st, min(path.length, st.s + window), 0.0,
                               geo.feed_cap(), m.dt)

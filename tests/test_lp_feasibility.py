@@ -463,3 +463,16 @@ def test_pchip_layer_whole_job_passes_the_checker_at_its_knots(corpus_all_few):
     res = LPPlanner().plan(req)
     rep = played(path, res.profile, m.limits, m.dt)
     assert rep.violations == 0, rep.first
+
+
+def test_an_empty_window_is_a_planning_error_not_a_crash():
+    """A request whose window is empty (start at s_end) is refused with PlanningError;
+    it used to end in ZeroDivisionError in the finer-grid retries of a cold plan (found by
+    bench/replan_continuity.py on c-short-xy-0p5mm)."""
+    from lookahead.planning.base import PlanningError
+
+    _, pts, _ = preset_points("tube-1450")
+    path = fit_points(pts[:40], np.asarray(MACHINE.path_scale), "cubic")
+    s = path.length / 2
+    with pytest.raises(PlanningError, match="must exceed"):
+        LPPlanner().plan(PlanRequest(path, MACHINE.limits, PathState(s), s, dt=MACHINE.dt))

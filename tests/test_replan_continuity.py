@@ -41,7 +41,7 @@ def test_heuristic_replans_from_any_state_of_its_plan(name):
 
 @pytest.mark.xfail(strict=False, reason="known open (issue 13): the LP refuses some "
                    "replans from the braking into its own window end (fast corpus, 30 "
-                   "states a path: 19 of 518, all in the last 2 % of the plan at v < 8 "
+                   "states a path: 18 of 518, all in the last 2 % of the plan at v < 8 "
                    "mm/s, every one refused by the engine's check for jerk; before the "
                    "moving-start work 37, most HiGHS 'Infeasible'); these 8 states may pass")
 @pytest.mark.parametrize("name", ["w-hoop-R40-band8-2mm"])

@@ -407,6 +407,9 @@ class LPPlanner:
         resolved by too few nodes for the jerk rows between its start and stop S-curves
         (measured: 35-100 mm fits and B-spline pieces)."""
         length = float(request.s_end - request.start.s)
+        if not length > 0.0:  # an empty window: refused by the grid, never refined
+            raise PlanningError(f"lp: s_end {request.s_end} must exceed start.s "
+                                f"{request.start.s}")
         h = self.grid_step or default_grid_step(request.path, request.limits)
         try:
             return self._plan(request, fixed_head, None)
