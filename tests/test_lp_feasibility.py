@@ -391,7 +391,7 @@ def test_start_jerk_row_is_the_axis_jerk_of_the_start(tube):
 def test_knot_fd_share_is_the_checkers_third_difference_of_an_acceleration_step():
     """A step D in acceleration between samples theta of a step apart: the largest third
     difference / dt^3 is 0.75 D / dt at theta = 1/2, never more."""
-    from lookahead.planning.lp.planner import KNOT_FD_SHARE
+    from lookahead.planning.lp.knots import KNOT_FD_SHARE
 
     dt, D = 1e-3, 5.0
     worst = []

@@ -37,7 +37,7 @@ Two more causes of failed or slow plans: a jerk pass that leaves a node far belo
 linearization point is re-linearized (RELINEARIZE_RATIO: the tangent pins it near 0,
 which made a 6.7 s window take 18 s), and at a C1 path's knots the checker's third
 difference adds KNOT_FD_SHARE |jump of x_ss| v^2 / dt to the jerk, which the jerk rows
-and the check now include (`knot_jumps`, `knot_fd_ratio`).
+and the check now include (`lp.knots`).
 """
 
 from __future__ import annotations
@@ -65,6 +65,7 @@ from lookahead.planning.lp.grid import (
     refine_grid,
     split_near,
 )
+from lookahead.planning.lp.knots import c1_knot_caps, knot_fd_ratio, knot_jumps
 from lookahead.planning.lp.profile import (
     grid_time,
     node_accelerations,
@@ -201,78 +202,6 @@ def default_grid_step(path: Path, limits: AxisLimits, interval_s: float = 0.0045
     """Grid spacing: the distance covered in `interval_s` at the fastest feed the axis
     velocity limits could allow (path units)."""
     return float(interval_s * np.linalg.norm(limits.vmax * path.path_scale))
-
-
-def c1_knot_caps(path: Path, s: np.ndarray, limits: AxisLimits, dt: float) -> np.ndarray:
-    """Feed cap at the nodes next to C1 knots: sqrt(jmax dt / |jump of x_ss|) (DESIGN.md)."""
-    caps = np.full(s.size, np.inf)
-    if path.continuity() >= 2:
-        return caps
-    knots = path.breakpoints_s()
-    knots = knots[(knots > s[0]) & (knots < s[-1])]
-    if knots.size == 0:
-        return caps
-    eps = 1e-7 * max(path.length, 1.0)
-    jump = np.abs(path.eval_s(knots + eps, 2)[2] - path.eval_s(knots - eps, 2)[2])
-    with np.errstate(divide="ignore"):
-        vcap = np.min(np.sqrt(limits.jmax * dt / jump), axis=1)
-    idx = np.searchsorted(s, knots)
-    for lo, v in zip(idx, vcap, strict=True):
-        sl = slice(max(lo - 2, 0), min(lo + 2, s.size))
-        caps[sl] = np.minimum(caps[sl], v)
-    return caps
-
-
-#: the checker's third difference over samples dt apart of a step D in the axis
-#: acceleration (a C1 knot passed at feed v: D = |jump of x_ss| v^2) peaks at this times
-#: D / dt, for a step midway between two samples (the weights are theta^2 / 2,
-#: (1 + 2 theta - 2 theta^2) / 2, (1 - theta)^2 / 2 at a step theta of a sample step in)
-KNOT_FD_SHARE = 0.75
-
-
-def knot_jumps(path: Path, s: np.ndarray) -> np.ndarray | None:
-    """Per node (n, naxes): the largest |jump of x_ss| (axis units / path unit^2) of the
-    C1 knots within its neighbouring intervals (s_i-1, s_i+1), times KNOT_FD_SHARE;
-    None on a C2 path or where no knot lies inside."""
-    if path.continuity() >= 2:
-        return None
-    knots = path.breakpoints_s()
-    knots = knots[(knots > s[0]) & (knots < s[-1])]
-    if knots.size == 0:
-        return None
-    eps = 1e-7 * max(path.length, 1.0)
-    jump = np.abs(path.eval_s(knots + eps, 2)[2] - path.eval_s(knots - eps, 2)[2])
-    interval = np.clip(np.searchsorted(s, knots) - 1, 0, s.size - 2)
-    per_interval = np.zeros((s.size - 1, jump.shape[1]))
-    np.maximum.at(per_interval, interval, jump)
-    out = np.zeros((s.size, jump.shape[1]))
-    out[:-1] = per_interval
-    out[1:] = np.maximum(out[1:], per_interval)
-    return KNOT_FD_SHARE * out if np.any(out > 0.0) else None
-
-
-def knot_fd_ratio(path: Path, limits: AxisLimits, dt: float, s: np.ndarray,
-                  v: np.ndarray) -> np.ndarray | None:
-    """The checker's extra jerk at C1 knots over the jerk limit, at arc lengths s with
-    feed v (the analytic check sees only the smooth jerk between the knots): max over the
-    axes of KNOT_FD_SHARE |jump of x_ss| v^2 / (dt jmax) where a knot lies within two
-    samples (2 v dt) of s, else 0; None on a C2 path."""
-    if path.continuity() >= 2 or s.size == 0:
-        return None
-    knots = path.breakpoints_s()
-    knots = knots[(knots > s.min() - 1e-9) & (knots < s.max() + 1e-9)]
-    if knots.size == 0:
-        return None
-    eps = 1e-7 * max(path.length, 1.0)
-    jump = np.abs(path.eval_s(knots + eps, 2)[2] - path.eval_s(knots - eps, 2)[2])
-    per_knot = np.max(jump / limits.jmax, axis=1)
-    i = np.clip(np.searchsorted(knots, s), 1, knots.size - 1) if knots.size > 1 else \
-        np.zeros(s.size, dtype=int)
-    lo = np.maximum(i - 1, 0)
-    near_lo = np.abs(s - knots[lo]) <= 2.0 * v * dt
-    near_hi = np.abs(s - knots[i]) <= 2.0 * v * dt
-    worst = np.maximum(np.where(near_lo, per_knot[lo], 0.0), np.where(near_hi, per_knot[i], 0.0))
-    return KNOT_FD_SHARE * worst * v**2 / dt
 
 
 def worst_place(ratios: SampledRatios, profile: FeedProfile) -> tuple[str, float]:

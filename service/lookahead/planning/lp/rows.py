@@ -276,7 +276,7 @@ def jerk_rows(
 
     J = scale_i jmax_k; q* is floored at q_floor (a tangent at 0 does not exist).
     knot: per node and axis (n, naxes), the checker's extra jerk per unit q at a C1 knot
-    nearby (`lp.planner.knot_jumps` / dt, s^-1 / path unit^2 ...): the row then bounds
+    nearby (`lp.knots.knot_jumps` / dt, s^-1 / path unit^2 ...): the row then bounds
     |jerk| + knot q by J, the tangent of the convex J / sqrt(q) - knot sqrt(q) at q*:
     +-sqrt(q*) L + (J / (2 q*) + knot / 2) q <= 3/2 J - knot q* / 2 (conservative).
     """
