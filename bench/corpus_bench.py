@@ -176,6 +176,23 @@ def run_whole(p, method: str) -> dict:
     return out
 
 
+def engine_batches(engine, idle_limit: int = 100_000):
+    """The batches of an Engine in fast mode up to and including the final one (stops
+    early when it is idle `idle_limit` calls in a row or no longer busy)."""
+    idle = 0
+    while True:
+        batch = engine.next_batch()
+        if batch is None:
+            idle += 1
+            if idle > idle_limit or not engine.busy:
+                return
+            continue
+        idle = 0
+        yield batch
+        if batch.final:
+            return
+
+
 def run_engine(p, method: str) -> dict:
     """The service's engine in fast mode, fed every segment at once; until the final batch."""
     from lookahead.checker import LimitChecker
@@ -202,15 +219,8 @@ def run_engine(p, method: str) -> dict:
         for seg in segments:
             events += engine.submit(seg)
         checker = LimitChecker(m.limits, m.dt)
-        samples, last_pos, final, idle = 0, None, False, 0
-        while not final:
-            batch = engine.next_batch()
-            if batch is None:
-                idle += 1
-                if idle > 100_000 or not engine.busy:
-                    break
-                continue
-            idle = 0
+        samples, last_pos, final = 0, None, False
+        for batch in engine_batches(engine):
             checker.feed(batch.pos)
             samples += batch.n
             last_pos = batch.pos[-1]
@@ -275,19 +285,28 @@ def run_task(task: tuple[str, str, float]) -> tuple[str, str, dict]:
     name, method, timeout = task
     logging.getLogger("lookahead").setLevel(logging.WARNING)
     logging.getLogger("lookahead").propagate = False
+
+    def task() -> dict:
+        p = _corpus_path(name)
+        if method == "bound":
+            return run_bound(p)
+        if method == "reference":
+            return run_reference(p)
+        if method.startswith("engine-"):
+            return run_engine(p, method)
+        return run_whole(p, method)
+
+    return name, method, run_guarded(task, timeout)
+
+
+def run_guarded(task, timeout: float) -> dict:
+    """task() (a result dict) under a SIGALRM timeout; never raises: a timeout or an
+    exception comes back as {"error": reason, ...}; "task_s" is its wall time."""
     old = signal.signal(signal.SIGALRM, _alarm)
     signal.alarm(max(1, int(timeout)))
     t0 = time.perf_counter()
     try:
-        p = _corpus_path(name)
-        if method == "bound":
-            out = run_bound(p)
-        elif method == "reference":
-            out = run_reference(p)
-        elif method.startswith("engine-"):
-            out = run_engine(p, method)
-        else:
-            out = run_whole(p, method)
+        out = task()
     except _TimeoutError:
         out = {"error": f"timeout: more than {timeout:g} s (task killed)"}
     except Exception as exc:  # a bad path must not stop the bench
@@ -298,7 +317,7 @@ def run_task(task: tuple[str, str, float]) -> tuple[str, str, dict]:
         signal.alarm(0)
         signal.signal(signal.SIGALRM, old)
     out.setdefault("task_s", time.perf_counter() - t0)
-    return name, method, out
+    return out
 
 
 # --- aggregation --------------------------------------------------------------------------

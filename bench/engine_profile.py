@@ -147,7 +147,7 @@ def run_one(name: str, method: str, timed: bool = True) -> dict:
     """One (path, method) in this process: wall time, buckets, replans, setpoint hash."""
     import numpy as np
 
-    from bench.corpus_bench import _corpus_path
+    from bench.corpus_bench import _corpus_path, engine_batches
     from lookahead.checker import LimitChecker
     from lookahead.stream.engine import Engine
 
@@ -165,16 +165,9 @@ def run_one(name: str, method: str, timed: bool = True) -> dict:
     for seg in segments:
         engine.submit(seg)
     checker = LimitChecker(m.limits, m.dt)
-    samples, final, idle, check_s = 0, False, 0, 0.0
+    samples, final, check_s = 0, False, 0.0
     batches = []
-    while not final:
-        batch = engine.next_batch()
-        if batch is None:
-            idle += 1
-            if idle > 100_000 or not engine.busy:
-                break
-            continue
-        idle = 0
+    for batch in engine_batches(engine):
         tc = time.perf_counter()
         checker.feed(batch.pos)
         check_s += time.perf_counter() - tc

@@ -21,10 +21,7 @@ import argparse
 import contextlib
 import json
 import math
-import signal
 import sys
-import time
-import traceback
 from pathlib import Path as FsPath
 from typing import Any
 
@@ -105,23 +102,12 @@ def lp_setting(combo: dict[str, Any]):
 
 def run_one(p, mode: str, combo: dict[str, Any], timeout: float) -> dict:
     """One (path, mode) under a combination; never raises (errors come back as rows)."""
-    old = signal.signal(signal.SIGALRM, corpus_bench._alarm)
-    signal.alarm(max(1, int(timeout)))
-    t0 = time.perf_counter()
-    try:
+    def task() -> dict:
         with lp_setting(combo):
-            out = (corpus_bench.run_engine(p, "engine-lp") if mode == "engine"
-                   else corpus_bench.run_whole(p, "lp"))
-    except corpus_bench._TimeoutError:
-        out = {"error": f"timeout: more than {timeout:g} s"}
-    except Exception as exc:  # a failing combination must not stop the bench
-        tb = traceback.extract_tb(exc.__traceback__)
-        where = f"{tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
-        out = {"error": f"{type(exc).__name__}: {exc}"[:400], "where": where}
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, old)
-    out.setdefault("task_s", time.perf_counter() - t0)
+            return (corpus_bench.run_engine(p, "engine-lp") if mode == "engine"
+                    else corpus_bench.run_whole(p, "lp"))
+
+    out = corpus_bench.run_guarded(task, timeout)
     out.pop("warning_messages", None)
     return out
 

@@ -20,7 +20,7 @@ import pytest
 
 from lookahead.checker import LimitChecker, Violation
 from lookahead.config import default_config
-from lookahead.geometry.deviation import Excursion, PolylineDistance, interval_excursions
+from lookahead.geometry.deviation import PolylineDistance, excursion_runs, interval_excursions
 from lookahead.geometry.fits import fit_path
 from lookahead.limits import AxisLimits
 from lookahead.planning.base import PathState, PlanRequest
@@ -190,16 +190,7 @@ def _all_measured(path, points, k0, k1, tolerance, per_interval=16, context=4):
     frac = np.arange(1, per_interval) / per_interval
     u = (knots[k0:k1, None] + np.diff(knots)[k0:k1, None] * frac[None, :]).ravel()
     dev = PolylineDistance(points[lo:hi], path.path_scale)(path.eval_u(u, 0)[0])
-    over = dev > tolerance
-    if not over.any():
-        return []
-    s = path.s_of_u(u)
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], over.astype(int), [0]])))
-    out = []
-    for a, b in zip(edges[::2], edges[1::2], strict=True):
-        j = a + int(np.argmax(dev[a:b]))
-        out.append(Excursion(float(s[a]), float(s[b - 1]), float(dev[j]), float(s[j])))
-    return out
+    return excursion_runs(path, u, dev, tolerance)
 
 
 def test_excursions_equal_measuring_every_sample():

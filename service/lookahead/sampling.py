@@ -48,15 +48,11 @@ def _robust_path_state(profile: FeedProfile, t: np.ndarray, raw: np.ndarray | No
     return s, np.maximum(v, 0.0), a
 
 
-def sample_profile(path: Path, profile: FeedProfile, t: np.ndarray) -> Samples:
-    """Axis pos/vel/acc at profile times t (s from the profile's start; clipped to it)."""
-    return sample_profile_states(path, profile, t)
-
-
-def sample_profile_states(path: Path, profile: FeedProfile, t: np.ndarray,
-                          raw: np.ndarray | None = None) -> Samples:
-    """`sample_profile`, given `raw` = profile.at(t) (rows s, v, a[, j]) when the caller
-    has evaluated it already (the same values: `FeedProfile.at` is pointwise)."""
+def sample_profile(path: Path, profile: FeedProfile, t: np.ndarray,
+                   raw: np.ndarray | None = None) -> Samples:
+    """Axis pos/vel/acc at profile times t (s from the profile's start; clipped to it).
+    raw: profile.at(t) (rows s, v, a[, j]) when the caller has evaluated it already (the
+    same values: `FeedProfile.at` is pointwise)."""
     t = np.atleast_1d(np.asarray(t, dtype=float))
     s, v, a = _robust_path_state(profile, t, raw)
     d = path.eval_s(s, order=2)

@@ -31,6 +31,14 @@ _BATCH = 20_000
 _GOLDEN = 0.5 * (np.sqrt(5.0) - 1.0)
 
 
+def segment_distance(x: np.ndarray, a: np.ndarray, ab: np.ndarray) -> np.ndarray:
+    """Distances of points x from the segments a -> a + ab (metric units; arrays that
+    broadcast, coordinates on the last axis)."""
+    denom = np.maximum(np.sum(ab * ab, axis=-1), 1e-300)
+    t = np.clip(np.sum((x - a) * ab, axis=-1) / denom, 0.0, 1.0)
+    return np.linalg.norm(x - (a + t[..., None] * ab), axis=-1)
+
+
 class PolylineDistance:
     """Distance (path units) of positions from the polyline through `points` (n, naxes)."""
 
@@ -58,11 +66,8 @@ class PolylineDistance:
 
     def _to_pieces(self, x: np.ndarray, idx: np.ndarray) -> np.ndarray:
         """Distances (m, k) of metric positions x (m, naxes) to pieces idx (m, k)."""
-        a, b = self._a[idx], self._b[idx]
-        ab = b - a
-        denom = np.maximum(np.sum(ab * ab, axis=-1), 1e-300)
-        t = np.clip(np.sum((x[:, None, :] - a) * ab, axis=-1) / denom, 0.0, 1.0)
-        return np.linalg.norm(x[:, None, :] - (a + t[..., None] * ab), axis=-1)
+        a = self._a[idx]
+        return segment_distance(x[:, None, :], a, self._b[idx] - a)
 
     def __call__(self, positions: np.ndarray) -> np.ndarray:
         """(m,) distances of positions (m, naxes), axis units, from the polyline."""
@@ -178,10 +183,7 @@ def _own_chord_distance(x: np.ndarray, points: np.ndarray, path_scale: np.ndarra
         return out.ravel()
     pts = np.asarray(points[k0:i1 + 1], dtype=float) * scale
     a, ab = pts[:-1, None, :], (pts[1:] - pts[:-1])[:, None, :]
-    xm = x.reshape(nint, per, -1)[:n] * scale
-    denom = np.maximum(np.sum(ab * ab, axis=-1), 1e-300)
-    t = np.clip(np.sum((xm - a) * ab, axis=-1) / denom, 0.0, 1.0)
-    out[:n] = np.linalg.norm(xm - (a + t[..., None] * ab), axis=-1)
+    out[:n] = segment_distance(x.reshape(nint, per, -1)[:n] * scale, a, ab)
     return out.ravel()
 
 
@@ -200,15 +202,22 @@ def excursions(path: Path, points: np.ndarray, tolerance: float, per_interval: i
                ) -> list[Excursion]:
     """Where `path` leaves the polyline of `points` by more than `tolerance`."""
     d = path_deviation(path, points, per_interval, refine_above=tolerance)
-    over = d.dev > tolerance
+    return excursion_runs(path, d.u, d.dev, tolerance)
+
+
+def excursion_runs(path: Path, u: np.ndarray, dev: np.ndarray, tolerance: float
+                   ) -> list[Excursion]:
+    """The runs of consecutive samples (at parameters u, increasing) whose distance `dev`
+    from the polyline exceeds `tolerance`, each as an Excursion with its largest one."""
+    over = dev > tolerance
     if not np.any(over):
         return []
+    s = path.s_of_u(u)
     edges = np.flatnonzero(np.diff(np.concatenate([[0], over.astype(int), [0]])))
     out = []
-    s = path.s_of_u(d.u)
-    for lo, hi in zip(edges[::2], edges[1::2], strict=True):
-        j = lo + int(np.argmax(d.dev[lo:hi]))
-        out.append(Excursion(float(s[lo]), float(s[hi - 1]), float(d.dev[j]), float(s[j])))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        j = a + int(np.argmax(dev[a:b]))
+        out.append(Excursion(float(s[a]), float(s[b - 1]), float(dev[j]), float(s[j])))
     return out
 
 
@@ -231,13 +240,4 @@ def interval_excursions(path: Path, points: np.ndarray, k0: int, k1: int, tolera
     near = np.flatnonzero(dev > tolerance * (1.0 - _BOUND_REL))
     if near.size:
         dev[near] = PolylineDistance(points[lo:hi], path.path_scale)(x[near])
-    over = dev > tolerance
-    if not np.any(over):
-        return []
-    s = path.s_of_u(u)
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], over.astype(int), [0]])))
-    out = []
-    for a, b in zip(edges[::2], edges[1::2], strict=True):
-        j = a + int(np.argmax(dev[a:b]))
-        out.append(Excursion(float(s[a]), float(s[b - 1]), float(dev[j]), float(s[j])))
-    return out
+    return excursion_runs(path, u, dev, tolerance)

@@ -24,7 +24,7 @@ from lookahead.planning.base import (
     PlanRequest,
     PlanResult,
 )
-from lookahead.sampling import Samples, sample_profile, sample_profile_states
+from lookahead.sampling import Samples, sample_profile
 
 #: relative tolerance on arc lengths (fraction of the path length, at least 1 unit)
 S_TOL = 1e-9
@@ -103,8 +103,8 @@ class CommittedPlan:
                 same = np.all(np.abs(mine - theirs) <= tol[:, None], axis=0)
                 if lo == k_new:
                     k_new = lo + (int(np.argmin(same)) if not np.all(same) else same.size)
-        fresh = sample_profile_states(self.path, self.profile,
-                                      self.times(np.arange(k_new, k1), dt), raw[:, k_new - k0:])
+        fresh = sample_profile(self.path, self.profile, self.times(np.arange(k_new, k1), dt),
+                               raw[:, k_new - k0:])
         if k_new > k0:
             assert old is not None and previous is not None
             kept = slice(k0 - previous.cache_k0, k_new - previous.cache_k0)

@@ -335,7 +335,7 @@ class HeuristicPlanner:
         info["cells"] = grid.ncells
         if not info["verified"]:
             raise _RoundsExhaustedError(f"heuristic: no profile within the limits after "
-                                f"{info['rounds']} repair rounds")
+                                        f"{info['rounds']} repair rounds")
         return phases, info
 
     def _profile_phases(self, request: PlanRequest, grid: PathGrid, starts: np.ndarray,

@@ -34,6 +34,7 @@ import numpy as np
 
 from lookahead.planning.heuristic.levels import FeedLevels
 from lookahead.planning.heuristic.path_limits import SegmentBudgets
+from lookahead.planning.heuristic.profile_build import concat_phases
 from lookahead.planning.heuristic.rise import rise as _rise
 from lookahead.planning.heuristic.rise import rise_levels
 from lookahead.planning.heuristic.scurve import (
@@ -272,8 +273,7 @@ def _land_in_first(b: SegmentBudgets, curve: list, start: tuple[float, float],
             continue
         onto = solve(0, start, (v, a), length=f * L)
         if onto is not None:
-            return Phases(*(np.concatenate([getattr(onto, n), getattr(tail, n)])
-                            for n in ("duration", "jerk", "acc", "vel", "pos")))
+            return concat_phases([onto, tail])
     return None
 
 

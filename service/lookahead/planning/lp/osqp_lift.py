@@ -53,6 +53,20 @@ class Lifted:
         return np.concatenate(parts)
 
 
+def column_range(A: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per row of A (CSR): its first and last column with an entry, and whether it has
+    any (first = last = 0 for an empty row)."""
+    m = A.shape[0]
+    filled = np.diff(A.indptr) > 0
+    first = np.zeros(m, dtype=int)
+    last = np.zeros(m, dtype=int)
+    if A.nnz:
+        starts = A.indptr[:-1][filled]
+        first[filled] = np.minimum.reduceat(A.indices, starts)
+        last[filled] = np.maximum.reduceat(A.indices, starts)
+    return first, last, filled
+
+
 def lift_rows(A: sp.csr_matrix, order: int = ORDER, chain_weight: bool = True) -> Lifted:
     """`A` (m x n) rewritten on z and its forward differences up to `order`."""
     A = A.tocsr()
@@ -60,13 +74,7 @@ def lift_rows(A: sp.csr_matrix, order: int = ORDER, chain_weight: bool = True) -
     order = max(0, min(order, n - 1))
     offsets = np.cumsum([0] + [n - k for k in range(order + 1)])
     counts = np.diff(A.indptr)
-    filled = counts > 0
-    first = np.zeros(m, dtype=int)
-    last = np.zeros(m, dtype=int)
-    if A.nnz:
-        starts = A.indptr[:-1][filled]
-        first[filled] = np.minimum.reduceat(A.indices, starts)
-        last[filled] = np.maximum.reduceat(A.indices, starts)
+    first, last, filled = column_range(A)
     span = last - first + 1
     band = filled & (span <= order + 1)
     row_of = np.repeat(np.arange(m), counts)

@@ -238,8 +238,7 @@ def start_jerk_rows(geo: GridGeometry, jmax: np.ndarray, scale: float, v0: float
     bounded by nothing but node 1's row: its quintic reached 4.6 jmax at t = 0 from
     (628 mm/s, +1735 mm/s^2) on tube-1450, where the heuristic planned 0.998."""
     n = geo.n_nodes
-    h1, h2 = geo.s[1] - geo.s[0], geo.s[2] - geo.s[1]
-    w2 = 2.0 * np.array([1.0 / (h1 * (h1 + h2)), -1.0 / (h1 * h2), 1.0 / (h2 * (h1 + h2))])
+    w2 = fd_weights(geo.s[:3])[1][0]  # q'' of the quadratic through nodes 0, 1, 2
     k = geo.d1.shape[1]
     A = np.zeros((k, n))
     A[:, :3] = 0.5 * v0 * geo.d1[0, :, None] * w2[None, :]

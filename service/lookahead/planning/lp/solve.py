@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from lookahead.planning.lp.osqp_lift import Lifted, lift_rows
+from lookahead.planning.lp.osqp_lift import Lifted, column_range, lift_rows
 from lookahead.planning.lp.rows import Rows
 
 SOLVERS = ("osqp", "highs", "highs-milp")
@@ -142,9 +142,25 @@ class _OsqpMemory:
     y_bounds: np.ndarray
     keys: np.ndarray
     y_rows: np.ndarray
-    rho: float
     #: duals of the lifted difference chain (`osqp_lift`; empty without the lift)
     y_chain: np.ndarray
+
+
+@dataclass(frozen=True)
+class _RowSplit:
+    """A problem's unit-bound rows split once per solve into the limit rows (velocity
+    bounds, acceleration, jerk) and the jerk-change regularizer (`regularizer_rows`)."""
+
+    hard: sp.csc_matrix
+    hard_lo: np.ndarray
+    hard_hi: np.ndarray
+    soft: sp.csc_matrix
+    soft_hi: np.ndarray
+
+    @classmethod
+    def of(cls, rows: sp.csc_matrix, lower: np.ndarray, upper: np.ndarray) -> _RowSplit:
+        soft = regularizer_rows(rows, lower, upper)
+        return cls(rows[~soft], lower[~soft], upper[~soft], rows[soft], upper[soft])
 
 
 class OsqpBackend:
@@ -170,9 +186,9 @@ class OsqpBackend:
     the last one's size (the re-solves of one window: `_unstall`, repairs). map_windows:
     also across windows, mapped onto this problem's variables by node position s
     (`ScaledLP.nodes`: a seam reuses the last grid's nodes) and onto its rows by
-    `row_keys`; fresh nodes start at their lower bound (fresh_at_upper: upper) with dual 0.
+    `row_keys`; fresh nodes start at their lower bound with dual 0.
     Off by default (measured before the lift on w-hoop-R40-band8-2mm: 2 % faster plans
-    for ~5x the compute). warm_rho: start at the last solve's final rho (off).
+    for ~5x the compute).
 
     Acceptance (`_judge`): OSQP's answer z (clipped to the bounds) is judged on the rows
     themselves. Rows are split into the jerk-change regularizer (`regularizer_rows`) and
@@ -204,8 +220,6 @@ class OsqpBackend:
         shrink: float = 0.0,
         accept_iterate: bool = True,
         map_windows: bool = False,
-        fresh_at_upper: bool = False,
-        warm_rho: bool = False,
         lift: bool = True,
         polish: bool = True,
         eps_rel: float | None = 0.0,
@@ -225,10 +239,8 @@ class OsqpBackend:
         self.chain_weight = chain_weight
         self.lift = lift
         self.polish = polish
-        self.warm_rho = warm_rho
         self.accept_iterate = accept_iterate
         self.map_windows = map_windows
-        self.fresh_at_upper = fresh_at_upper
         self.mu = mu
         self.eps = eps
         self.max_iter = max_iter
@@ -264,22 +276,20 @@ class OsqpBackend:
         diag = np.arange(n)
         P = sp.csc_matrix((np.full(n, self.mu), (diag, diag)), shape=(N, N))  # z only
         cost = np.r_[lp.cost - self.mu * lp.upper, np.zeros(N - n)]
-        memory = self._memory
         settings = {"verbose": False, "eps_abs": self.eps, "eps_rel": self.eps_rel,
                     "max_iter": self.max_iter, "polishing": self.polish, "adaptive_rho": True,
                     # rho updates every ADAPTIVE_RHO_INTERVAL iterations, not OSQP's
                     # default (a fraction of the measured setup time), which made the
                     # answers, and whole plans, depend on the machine's load
                     "adaptive_rho_interval": ADAPTIVE_RHO_INTERVAL}
-        if memory is not None and z0 is None and self.warm_rho:
-            settings["rho"] = memory.rho
         solver = osqp.OSQP()
         solver.setup(P, cost, A, lo, hi, **settings)
         keys = row_keys(rows.tocsr(), lp.nodes) if lp.nodes is not None else None
+        split = _RowSplit.of(rows, row_lo, row_hi)
         self._warm_start(solver, lp, keys, z0, lifted, A.shape[0])
         res = solver.solve(raise_error=False)
         iterations = int(res.info.iter)
-        z, excess, converged, ok = self._judge(res, lp, rows, row_lo, row_hi)
+        z, excess, converged, ok = self._judge(res, lp, split)
         if not ok and self.retry and res.info.status_val not in _INFEASIBLE:
             # once more from where it stopped (OSQP keeps its iterate), to a tighter
             # tolerance and for longer: most answers refused for their row excess, and
@@ -287,7 +297,7 @@ class OsqpBackend:
             solver.update_settings(eps_abs=self.eps * RETRY_EPS, max_iter=self.max_iter)
             res = solver.solve(raise_error=False)
             iterations += int(res.info.iter)
-            z, excess, converged, ok = self._judge(res, lp, rows, row_lo, row_hi)
+            z, excess, converged, ok = self._judge(res, lp, split)
         if ok and self.prox_steps:
             solver.update_settings(max_iter=PROX_MAX_ITER)
         for _ in range(self.prox_steps if ok else 0):
@@ -300,7 +310,7 @@ class OsqpBackend:
                           Px=np.full(n, mu))
             again = solver.solve(raise_error=False)
             iterations += int(again.info.iter)
-            z2, excess2, converged2, ok2 = self._judge(again, lp, rows, row_lo, row_hi)
+            z2, excess2, converged2, ok2 = self._judge(again, lp, split)
             if not ok2 or float(lp.cost @ z2) >= float(lp.cost @ z) - PROX_GAIN * abs(
                     float(lp.cost @ z)):
                 if ok2 and float(lp.cost @ z2) < float(lp.cost @ z):
@@ -314,35 +324,28 @@ class OsqpBackend:
             self._memory = _OsqpMemory(
                 nodes, z * lp.q_scale, y[:n],
                 keys if keys is not None else np.empty((0, 3)), y[n:n + m],
-                float(getattr(res.info, "rho_estimate", 0.1) or 0.1), y[n + m:])
+                y[n + m:])
         status = (f"{res.info.status}{'' if converged else ' (iterate accepted)' if ok else ''}"
                   f" (worst row excess {excess:.1e} of its bound, jerk-change rows "
-                  f"{self._soft_excess(rows, row_lo, row_hi, z):.1e})")
+                  f"{_relative_excess(split.soft, split.soft_hi, z):.1e})")
         return LPOutcome(z * lp.q_scale, ok, status, iterations)
 
-    def _soft_excess(self, rows: sp.csc_matrix, row_lo: np.ndarray, row_hi: np.ndarray,
-                     z: np.ndarray) -> float:
-        """The jerk-change rows' worst excess relative to their bound (`regularizer_rows`)."""
-        soft = regularizer_rows(rows, row_lo, row_hi)
-        return _relative_excess(rows[soft], row_hi[soft], z)
-
-    def _judge(self, res, lp: ScaledLP, rows: sp.csc_matrix, row_lo: np.ndarray,
-               row_hi: np.ndarray) -> tuple[np.ndarray, float, bool, bool]:
-        """(z clipped to the bounds, its worst row excess, converged, accepted)."""
+    def _judge(self, res, lp: ScaledLP, split: _RowSplit
+               ) -> tuple[np.ndarray, float, bool, bool]:
+        """(z clipped to the bounds, its worst limit-row excess, converged, accepted)."""
         n = lp.cost.size
         converged = res.info.status_val in (1, 2)  # solved, solved inaccurate
         finite = res.x is not None and bool(np.all(np.isfinite(res.x)))
         z = np.asarray(res.x[:n], dtype=float) if res.x is not None else np.zeros(n)
         z = np.clip(np.nan_to_num(z), lp.lower, lp.upper)
-        soft = regularizer_rows(rows, row_lo, row_hi)
-        hard, lo_h, hi_h = rows[~soft], row_lo[~soft], row_hi[~soft]
+        hard, lo_h, hi_h = split.hard, split.hard_lo, split.hard_hi
         excess = _worst_excess(hard, lo_h, hi_h, z)
         certified = res.info.status_val in _INFEASIBLE
         if (finite and not certified and excess > 0.0 and excess <= self.pull_violation
                 and (converged or self.accept_iterate)):
             z, excess = _pull_inside(hard, lo_h, hi_h, lp.lower, z, excess)
         soft_ok = (not np.isfinite(self.soft_violation)
-                   or _relative_excess(rows[soft], row_hi[soft], z) <= self.soft_violation)
+                   or _relative_excess(split.soft, split.soft_hi, z) <= self.soft_violation)
         ok = (finite and excess <= self.accept_violation and soft_ok and not certified
               and (converged or self.accept_iterate))
         return z, excess, converged, ok
@@ -375,7 +378,7 @@ class OsqpBackend:
                 solver.warm_start(x=x)
             return
         # nodes: the same s to rounding (a seam reuses the node arrays themselves)
-        x = lp.upper.copy() if self.fresh_at_upper else lp.lower.copy()
+        x = lp.lower.copy()
         y_b = np.zeros(n)
         j = np.clip(np.searchsorted(mem.nodes, lp.nodes), 0, mem.nodes.size - 1)
         tol = 1e-9 * max(1.0, float(np.max(np.abs(lp.nodes))))
@@ -396,14 +399,8 @@ def regularizer_rows(A: sp.csc_matrix, lower: np.ndarray, upper: np.ndarray) -> 
     rows one-sided on three, midpoint jerk rows one-sided on four.) They are the LP's
     regularizer against zig-zag jerk, not a machine limit; the planner's sampled check
     judges the profile either way."""
-    R = A.tocsr()
-    counts = np.diff(R.indptr)
-    span = np.zeros(R.shape[0], dtype=int)
-    filled = counts > 0
-    if R.nnz:
-        starts = R.indptr[:-1][filled]
-        span[filled] = (np.maximum.reduceat(R.indices, starts)
-                        - np.minimum.reduceat(R.indices, starts) + 1)
+    first, last, filled = column_range(A.tocsr())
+    span = np.where(filled, last - first + 1, 0)
     symmetric = np.isfinite(lower) & np.isfinite(upper) & (upper > 0) & \
         np.isclose(lower, -upper, rtol=1e-9, atol=0.0)
     return (span == 4) & symmetric
