@@ -264,8 +264,13 @@ def feed_change_lists(s0: float, v0: float, a0: float, V: float, A: float,
         acc.append(a)
         vel.append(v)
         pos.append(s)
-        if a < 0.0 < a + j * d and v - a * a / (2.0 * j) < -1e-9 * max(abs(V), abs(v0)):
-            return None  # the feed would dip below 0 on the way
+        # the feed would dip below 0 on the way (beyond rounding: relative to the feeds
+        # and to this phase's own feed drop, so a change to V = 0 that ends exactly at 0
+        # is not refused for its last bit: v0 = V = 0 left no tolerance at all)
+        if a < 0.0 < a + j * d:
+            drop = a * a / (2.0 * j)
+            if v - drop < -1e-9 * max(abs(V), abs(v0), drop):
+                return None
         s += v * d + a * d * d / 2.0 + j * d**3 / 6.0
         v += a * d + j * d * d / 2.0
         a += j * d
