@@ -10,7 +10,11 @@ independent slow one (issues 13/14, bench/engine_profile.py).
 - fit-excursion warnings (own-chord bound first) against measuring every sample;
 - the replan cadence: the engine replans only when its plan looks ahead less than the
   keep distance, still replans as geometry streams in, and every plan it commits passes
-  the checker with the published tail (as before).
+  the checker with the published tail (as before);
+- the geometry a segment and a batch touch: the excursion check measures the fit's final
+  pieces (`StreamingFit.final_path`, bit for bit the live path there) without building
+  the tail; a batch between replans asks nothing of the geometry; the per-batch memos
+  give the batches of deciding afresh.
 """
 
 from __future__ import annotations
@@ -159,10 +163,10 @@ def _slow_check(pos: np.ndarray, limits: AxisLimits, dt: float):
     return counts, peaks, first
 
 
-@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("seed", range(10))
 def test_checker_equals_the_formula_order_by_order(seed):
     rng = np.random.default_rng(seed)
-    n, naxes = int(rng.integers(50, 5000)), int(rng.integers(1, 5))
+    n, naxes = int(rng.integers(50, 5000)), int(rng.integers(1, 7))
     lim = AxisLimits(rng.uniform(1, 100, naxes), rng.uniform(10, 1e3, naxes),
                      rng.uniform(1e2, 1e5, naxes))
     noise = 10.0 ** rng.uniform(-9, -5)  # from no violation to many
@@ -288,3 +292,160 @@ def test_replans_only_when_looking_ahead_less_than_the_keep_distance(monkeypatch
         assert max(look for look, end in looks if not end) <= engine._keep * (1 + 1e-9)
         length = float(np.sum(np.linalg.norm(np.diff(pos, axis=0) * m.path_scale, axis=1)))
         assert engine.replans <= length / (engine.horizon_len - engine._keep) + 3
+
+
+# --- the geometry a segment and a batch touch ------------------------------------------
+
+
+def _zigzag_points(n: int = 400, seed: int = 5) -> np.ndarray:
+    """Sharp-ish turns a cubic fit overshoots (excursion warnings), then smooth stretches."""
+    rng = np.random.default_rng(seed)
+    steps = rng.normal(size=(n, 2)) * [4.0, 6.0] + [3.0, 5.0]
+    return np.cumsum(steps, axis=0)
+
+
+@pytest.mark.parametrize("method", ["cubic", "pchip"])
+def test_final_path_is_the_live_path_on_its_final_intervals(method):
+    """`StreamingFit.final_path()` (what the excursion check measures) is bit for bit the
+    live `path()` on [0, final_length]: knots, arc lengths, positions and derivatives."""
+    from lookahead.geometry.fits import make_streaming_fit
+
+    rng = np.random.default_rng(3)
+    pts = _zigzag_points(300)
+    scale = np.array([1.0, 0.5])
+    fit = make_streaming_fit(2, scale, method)
+    checked = 0
+    a = 0
+    while a < len(pts):
+        b = a + int(rng.integers(1, 40))
+        fit.extend(pts[a:b])
+        a = b
+        final = fit.final_path()
+        live = fit.path()
+        if final is None:
+            assert fit.final_length == 0.0
+            continue
+        k0 = len(final.breakpoints_u()) - 1
+        # the intervals the check measured before: from the live path's arc lengths
+        assert k0 == int(np.searchsorted(live.breakpoints_s(), fit.final_length,
+                                         side="right") - 1)
+        np.testing.assert_array_equal(final.breakpoints_u(), live.breakpoints_u()[:k0 + 1])
+        np.testing.assert_array_equal(final.breakpoints_s(), live.breakpoints_s()[:k0 + 1])
+        assert final.length == fit.final_length
+        u = np.sort(rng.uniform(0.0, final.breakpoints_u()[-1], 200))
+        np.testing.assert_array_equal(final.eval_u(u, 3), live.eval_u(u, 3))
+        np.testing.assert_array_equal(final.s_of_u(u), live.s_of_u(u))
+        checked += 1
+    assert checked > 5
+
+
+def _count_calls(monkeypatch, owner, name: str) -> list[int]:
+    calls = [0]
+    inner = getattr(owner, name)
+
+    def counted(*args, **kwargs):
+        calls[0] += 1
+        return inner(*args, **kwargs)
+
+    monkeypatch.setattr(owner, name, counted)
+    return calls
+
+
+def test_segments_are_checked_for_excursions_without_building_the_live_path(monkeypatch):
+    """Taking in a segment measures the fit's newly final pieces only: the tail the next
+    points change is not solved and integrated per segment (it was, ~3 ms each), and the
+    warnings are those of measuring the live path as before."""
+    from lookahead.geometry.deviation import interval_excursions as measure
+    from lookahead.geometry.streaming import StreamingFit
+    from lookahead.stream.assembler import MAX_WARNINGS
+
+    cfg = default_config()
+    pts = _zigzag_points(400)
+    segs = _segments("zz", pts, 25)
+    # the warnings as before: the live path's final intervals after each segment
+    fit = StreamingFit(2, np.asarray(cfg.machine.path_scale), "cubic")
+    want, checked = [], 0
+    for seg in segs[:-1]:
+        fit.extend(seg.points)
+        live = fit.path()
+        k1 = int(np.searchsorted(live.breakpoints_s(), fit.final_length, side="right") - 1)
+        if k1 > checked:
+            found = measure(live, fit.points(), checked, k1, cfg.planner.tolerance)
+            checked = k1
+            if found:
+                worst = max(found, key=lambda e: e.dev)
+                want.append((seg.seq, worst.s_max, worst.dev))
+    assert len(want) >= 3
+    tails = _count_calls(monkeypatch, StreamingFit, "_tail_pieces")
+    engine = Engine(cfg, HeuristicPlanner(margin=1.0))
+    for seg in segs[:-1]:
+        engine.submit(seg)
+    assert tails[0] == 0
+    got = [(e.extra["seq"], e.extra["s"], e.extra["deviation"])
+           for e in engine.drain_events() if e.type == "warning"]
+    assert got == want[:MAX_WARNINGS]
+
+
+@pytest.mark.parametrize("stream", [False, True])
+def test_batches_between_replans_do_not_touch_the_geometry(monkeypatch, stream):
+    """A batch whose plan looks ahead more than the keep distance, or ends the finished
+    job, decides from the plan alone: no `JobGeometry.path()` (a rebuild of the live path
+    after each new segment). It was asked 1.5-3 times a batch. Streamed as the service
+    runs it (real time; fast mode also asks each batch whether the plan stops at the end
+    of what was sent), batches whose plan the streamed geometry holds back still ask."""
+    from lookahead.stream.assembler import JobGeometry
+
+    cfg = default_config()
+    segs = _segments("geo", _wavy(2000, turns=8.0) * [1.0, 3.0], 100)
+    feed = {30 * i: [s] for i, s in enumerate(segs)} if stream else {0: segs}
+    engine = Engine(cfg, HeuristicPlanner(margin=1.0), realtime=stream)
+    paths = _count_calls(monkeypatch, JobGeometry, "path")
+    batches, _ = _run(engine, feed)
+    assert len(batches) > 20 * engine.replans
+    if stream:
+        assert paths[0] < 0.5 * len(batches), (paths[0], len(batches))
+    else:  # per replan: its request and bookkeeping; a few at the job's start and end
+        assert paths[0] <= 6 * engine.replans + 20, (paths[0], engine.replans)
+
+
+def test_per_batch_shortcuts_change_no_batch(monkeypatch):
+    """The per-job memos (`settled`, `ends_job`, `end_memo`) and `CommittedPlan.s_at` give
+    the batches of deciding everything afresh each batch: streamed geometry, a hold and
+    resume, overrides down and up, to the end of the job."""
+    from lookahead.protocol import Command
+
+    cfg = default_config()
+    segs = _segments("memo", _wavy(1500, turns=6.0) * [1.0, 3.0], 100)
+    feed = {25 * i: [s] for i, s in enumerate(segs)}
+    commands = {300: "hold", 420: "resume", 700: ("override", 0.6), 900: ("override", 1.0)}
+
+    def run(fresh: bool):
+        engine = Engine(cfg, HeuristicPlanner(margin=1.0))
+        out = []
+        for i in range(100_000):
+            for seg in feed.get(i, []):
+                engine.submit(seg)
+            cmd = commands.get(i)
+            if cmd is not None:
+                verb, value = (cmd, None) if isinstance(cmd, str) else cmd
+                assert engine.command(Command(verb, value)).ok
+            job = engine._active
+            if fresh and job is not None:
+                job.settled = job.ends_job = job.end_memo = None
+            batch = engine.next_batch()
+            if batch is not None:
+                out.append(batch)
+                if batch.final:
+                    return engine, out
+        raise AssertionError("the job did not finish")
+
+    with monkeypatch.context() as mp:
+        mp.setattr(CommittedPlan, "s_at", lambda self, k, dt: self.state(k, dt).s)
+        ref_engine, ref = run(fresh=True)
+    engine, got = run(fresh=False)
+    assert engine.replans == ref_engine.replans > 5
+    assert len(got) == len(ref)
+    for a, b in zip(got, ref, strict=True):
+        assert (a.k0, a.final) == (b.k0, b.final)
+        for f in ("pos", "vel", "acc"):
+            np.testing.assert_array_equal(getattr(a, f), getattr(b, f))

@@ -183,6 +183,7 @@ class StreamingFit(PointStream):
         self._leaf_length = _Buffer(())
         self._leaf_count = _Buffer((), dtype=int)
         self._s_final = 0.0
+        self._final: tuple[int, Path] | None = None  # (final intervals, `final_path()`)
 
     # --- finalization -----------------------------------------------------------------
     def _knots(self, lo: int, hi: int) -> np.ndarray:
@@ -263,6 +264,21 @@ class StreamingFit(PointStream):
         continuity = 2 if self.method == "cubic" else 1
         self._path = SplinePath(pp, self.path_scale, continuity, leaves=leaves)
         return self._path
+
+    def final_path(self) -> Path | None:
+        """The final geometry alone, over its knot intervals (None before there is one):
+        the pieces, knots and arc-length leaves of `path()` on [0, final_length], without
+        building the tail that later points still change (`path()` solves and integrates
+        it on every call after new points)."""
+        k0 = self._leaf_count.size
+        if k0 < 1:
+            return None
+        if self._final is None or self._final[0] != k0:
+            pp = PPoly(self._coef.view(), self._u.view(0, k0 + 1), extrapolate=True)
+            continuity = 2 if self.method == "cubic" else 1
+            self._final = (k0, SplinePath(pp, self.path_scale, continuity,
+                                          leaves=self._final_leaves()))
+        return self._final[1]
 
     def _tail_pieces(self, k0: int, n: int) -> PPoly:
         """Pieces k0..n-1 from the current data, with the stream's end as the true end."""

@@ -27,6 +27,7 @@ from lookahead.geometry.fits import (
 )
 from lookahead.geometry.nurbs import BSplinePath, CompositePath
 from lookahead.geometry.polyline import DEFAULT_TOLERANCE
+from lookahead.geometry.streaming import StreamingFit
 from lookahead.planning.base import FeedCap
 from lookahead.protocol import Segment
 
@@ -354,9 +355,13 @@ class JobGeometry:
         if not fit.finished and fit.final_length == self._checked_final:
             return  # no new final pieces: skip building the live path (~3 ms a segment)
         self._checked_final = fit.final_length
-        path = fit.path()
-        k1 = len(path.pp.x) - 1 if fit.finished else int(
-            np.searchsorted(path.breakpoints_s(), fit.final_length, side="right") - 1)
+        # the final pieces alone until the stream ends: the live path would also solve
+        # and integrate the tail that the next points change (built per segment, ~3 ms)
+        assert isinstance(fit, StreamingFit)  # the interpolating fits
+        path = fit.path() if fit.finished else fit.final_path()
+        if path is None:
+            return
+        k1 = len(path.pp.x) - 1
         if k1 <= self._checked:
             return
         tol = self.default_tolerance if seg.tolerance is None else seg.tolerance

@@ -163,6 +163,13 @@ class _Job:
     last_try: int = 0
     last_fail: int = -(10**9)  # sample index of the last failed replan (retry backoff)
     fallbacks_at_start: int = 0  # engine.fallbacks when the job started (job_finished)
+    #: the plan in force once it ends at the end of the finished geometry: no replan
+    #: extends it (`Engine._maybe_replan`), only a command or a stop replaces it
+    settled: CommittedPlan | None = None
+    #: (plan, whether it ends at the end of the finished geometry) for `Engine._ending`
+    ends_job: tuple[CommittedPlan, bool] | None = None
+    #: (final_length, tolerance) once the geometry is finished (`Engine._finished_end`)
+    end_memo: tuple[float, float] | None = None
 
 
 class Engine:
@@ -401,13 +408,33 @@ class Engine:
             return True
         if job.hold or job.stop is not None or not job.geo.finished:
             return False
-        path = job.geo.path()
-        return path is not None and job.plan.s_end >= path.length - self._tol(job)
+        memo = job.ends_job  # finished geometry does not change: once per plan
+        if memo is None or memo[0] is not job.plan:
+            path = job.geo.path()
+            memo = (job.plan, path is not None
+                    and job.plan.s_end >= path.length - self._tol(job))
+            job.ends_job = memo
+        return memo[1]
 
     def _at_sent_end(self, job: _Job) -> bool:
         """The plan stops at the end of everything received, and the job is not complete."""
-        return (not job.geo.finished
-                and job.plan.s_end >= job.geo.sent_length - self._tol(job))
+        geo = job.geo
+        if geo.finished:
+            return False
+        # everything received extends the final geometry (sent_length >= final_length),
+        # and x - S_TOL max(x, 1) grows with x: a plan that stops this far short of the
+        # final length stops short of the sent one too, without building the live path
+        final = geo.final_length
+        if job.plan.s_end < final - 2.0 * S_TOL * max(final, 1.0):
+            return False
+        return job.plan.s_end >= geo.sent_length - self._tol(job)
+
+    def _finished_end(self, job: _Job) -> tuple[float, float]:
+        """(final_length, `_tol`) of a job whose geometry is finished (constants then)."""
+        if job.end_memo is None:
+            assert job.geo.finished
+            job.end_memo = (job.geo.final_length, self._tol(job))
+        return job.end_memo
 
     def _tol(self, job: _Job) -> float:
         return S_TOL * max(job.geo.sent_length, 1.0)
@@ -487,29 +514,48 @@ class Engine:
             return
         if job.stop in ("abort", "fault") or job.hold:
             return
-        state = plan.state(k_last, self.dt)
         if job.stop == "override":
             if at_rest:
                 job.stop = None
             else:
                 if k_last - job.last_try >= self._retry:
                     job.last_try = k_last
+                    state = plan.state(k_last, self.dt)
                     target = min(geo.final_length, state.s + self.horizon_len)
                     if target > state.s and self._commit(job, state, target, k_last):
                         job.stop = None
                 return
         if job.override_pending:
             job.override_pending = False
+            state = plan.state(k_last, self.dt)
             target = min(geo.final_length, state.s + self.horizon_len)
             if target > state.s + self._tol(job) and not self._commit(job, state, target, k_last):
                 self._begin_stop(job, "override")
                 job.last_try = k_last
             return
+        # the two common cases of every batch, decided without building the geometry
+        # (which new segments make stale) and without the path state: they return where
+        # the checks below would return too
+        if job.settled is plan:
+            return  # the plan reaches the end of the finished path (see below)
+        if not (at_rest or job.force_replan):
+            s = plan.s_at(k_last, self.dt)
+            if plan.s_end - s > self._keep:
+                if not geo.finished:
+                    return  # it looks ahead more than `_keep`, no window reaches the end
+                final, tol = self._finished_end(job)
+                if s + self.horizon_len < final - tol:
+                    return  # ... and the next window would not reach the end either
+        state = plan.state(k_last, self.dt)
         final = geo.final_length
         if at_rest and plan.s_end >= final - self._tol(job) and geo.freeze():
             final = geo.final_length
         target = min(final, state.s + self.horizon_len)
         if target <= plan.s_end + self._tol(job):
+            if geo.finished and final <= plan.s_end + self._tol(job):
+                # finished geometry does not change: every later target (<= final) is
+                # within this plan too, until a command or a new plan
+                job.settled = plan
             return
         since = k_last - plan.k_plan
         # the window reaches the job's end: plan it now (its exact time left, status

@@ -118,10 +118,19 @@ class CommittedPlan:
             return PathState(self.s_end)
         st = self.states
         if st is not None and 0 <= k - self.cache_k0 < st.shape[1]:
-            s, v, a = st[:, k - self.cache_k0]
+            s, v, a = st[:, k - self.cache_k0].tolist()
         else:
-            s, v, a, _ = self.profile.at(np.array([(k - self.k_plan) * dt]))[:, 0]
-        return PathState(float(s), max(float(v), 0.0), float(a))
+            s, v, a, _ = self.profile.at(np.array([(k - self.k_plan) * dt]))[:, 0].tolist()
+        return PathState(s, max(v, 0.0), a)
+
+    def s_at(self, k: int, dt: float) -> float:
+        """`state(k, dt).s` (the same value) without building the state: the
+        per-batch look-ahead test."""
+        st = self.states
+        i = k - self.cache_k0
+        if k < self.k_end and st is not None and 0 <= i < st.shape[1]:
+            return float(st[0, i])
+        return self.state(k, dt).s
 
     def remaining_s(self, k: int, dt: float) -> float:
         """Motion time (s) from sample k to the plan's end."""
