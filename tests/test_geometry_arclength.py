@@ -85,3 +85,14 @@ def test_exact_cusp_arc_length() -> None:
     s = np.linspace(0.0, path.length, 1001)
     assert np.max(np.abs(path.s_of_u(path.u_of_s(s)) - s)) <= 1e-13 * path.length
     assert np.all(np.diff(path.u_of_s(s)) > 0)
+
+
+@pytest.mark.parametrize("naxes", [1, 2, 3, 6, 9])
+def test_row_norms_are_the_euclidean_norms(naxes: int) -> None:
+    """The column-by-column speed norm of the arc-length quadrature equals the norm of
+    each row (to rounding), for any axis count."""
+    from lookahead.geometry.piecewise import _row_norms
+
+    y = np.random.default_rng(naxes).normal(size=(500, naxes)) * np.logspace(-3, 3, naxes)
+    np.testing.assert_allclose(_row_norms(y), np.linalg.norm(y, axis=1), rtol=4e-16 * naxes)
+    assert _row_norms(np.zeros((3, naxes))).tolist() == [0.0, 0.0, 0.0]
