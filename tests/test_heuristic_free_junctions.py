@@ -53,6 +53,8 @@ def _check(path, result, limits=LIMITS):
 # at 0 exactly and the dip test had no tolerance (refused for a last-bit negative feed)
 @example(v0=0.0, a_frac=0.5547147672999815, V=0.0, A=1.4344881856426854,
          J=16.643832424711604)
+# found by hypothesis: a0 tiny (6e-8) at the target feed, the overshoot below rounding
+@example(v0=2.0, a_frac=5.960464477539063e-08, V=2.0, A=1.0, J=9.0)
 def test_closed_form_feed_change_matches_ruckig(v0, a_frac, V, A, J):
     """Same duration and end state as Ruckig's velocity interface wherever the feed stays
     >= 0 (the closed form refuses a dip below 0, which Ruckig would plan)."""
@@ -66,12 +68,17 @@ def test_closed_form_feed_change_matches_ruckig(v0, a_frac, V, A, J):
     if not ref.duration.size or not mine.duration.size:
         assert abs(V - v0) < 1e-9 and abs(a0) < 1e-9
         return
-    # abs: a feed change below rounding (1e-17 of the feed) Ruckig times differently
-    assert np.sum(mine.duration) == pytest.approx(np.sum(ref.duration), rel=1e-9, abs=1e-8)
+    # abs: a feed change below rounding (1e-17 of the feed) Ruckig times differently; and
+    # where the overshoot of removing a0 alone, a0^2/(2J), is below the feed's rounding,
+    # the closed form only ramps a0 to 0 (time |a0|/J) while Ruckig also removes that
+    # overshoot exactly (time (1 + sqrt 2)|a0|/J): durations then differ by sqrt(2)|a0|/J
+    below_rounding = a0 * a0 / (2.0 * J) <= 8.0 * np.finfo(float).eps * max(v0, V, 1.0)
+    t_tol = 1e-8 + (1.5 * abs(a0) / J if below_rounding else 0.0)
+    assert np.sum(mine.duration) == pytest.approx(np.sum(ref.duration), rel=1e-9, abs=t_tol)
     s1, v1, a1 = end_state(mine)
     assert v1 == pytest.approx(V, abs=1e-9)
     assert a1 == pytest.approx(0.0, abs=1e-9)
-    assert s1 == pytest.approx(end_state(ref)[0], rel=1e-9, abs=1e-8)
+    assert s1 == pytest.approx(end_state(ref)[0], rel=1e-9, abs=1e-8 + max(v0, V) * t_tol)
 
 
 def test_cut_and_reverse_keep_the_motion_continuous():
