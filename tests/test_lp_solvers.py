@@ -280,3 +280,51 @@ def test_osqp_solves_the_planners_lps_on_corpus_paths_like_highs(name):
         assert _worst_excess(A[hard], lo[hard], hi[hard], z) <= backend.accept_violation
         best = float(lp.cost @ (ref.q / lp.q_scale))
         assert float(lp.cost @ z) == pytest.approx(best, rel=1e-2)
+
+
+class _EnoughError(Exception):
+    """Stops a recorded plan once the LPs a test needs are built."""
+
+
+def test_osqp_rescue_solves_the_butterfly_first_jerk_pass():
+    """n-butterfly's first jerk pass (the whole job from rest, near-stops where q is ~1e-4
+    of its cap): with the rows normalized at the first attempt's floor, ADMM stopped 6x
+    outside the jerk-change rows after both attempts and the engine fell back to the
+    heuristic (issue 13). The rescue (rows at their own bounds down to RESCUE_FLOOR) is
+    accepted: the bounds exactly, the limit rows to RESCUE_VIOLATION of their own bounds,
+    and its objective near HiGHS's optimum."""
+    from bench.corpus import load_corpus
+
+    from lookahead.planning.base import PathState, PlanRequest
+    from lookahead.planning.lp import LPPlanner
+    from lookahead.planning.lp.solve import RESCUE_FLOOR, RESCUE_VIOLATION
+
+    p = load_corpus("fast", pattern="n-butterfly")[0]
+    path, m = p.path(), p.config.machine
+    request = PlanRequest(path, m.limits.scaled(p.config.planner.margin), PathState(0.0),
+                          path.length, feed_cap=p.geometry().feed_cap(), dt=m.dt)
+    seen = []
+
+    class Recording(MilpBackend):
+        def solve(self, lp, z0=None):
+            out = super().solve(lp, z0)
+            seen.append((lp, out))
+            if len(seen) == 2:  # the v+a pass, the first jerk pass
+                raise _EnoughError
+            return out
+
+    planner = LPPlanner(solver="highs-milp")
+    planner.backend = Recording()
+    with pytest.raises(_EnoughError):
+        planner.plan(request)
+    lp, ref = seen[1]
+    assert ref.ok, ref.status
+    out = OsqpBackend().solve(lp)
+    assert out.ok, out.status
+    z = out.q / lp.q_scale
+    assert np.all(z >= lp.lower - 1e-12) and np.all(z <= lp.upper + 1e-12)
+    A, lo, hi = bound_normalized_rows(lp, RESCUE_FLOOR)
+    hard = ~regularizer_rows(A, lo, hi)
+    assert _worst_excess(A[hard], lo[hard], hi[hard], z) <= RESCUE_VIOLATION
+    best = float(lp.cost @ (ref.q / lp.q_scale))
+    assert float(lp.cost @ z) == pytest.approx(best, rel=3e-2)

@@ -29,6 +29,24 @@ RETRY_EPS = 0.2
 #: and each gets at most PROX_MAX_ITER ADMM iterations (it starts at the last answer)
 PROX_GAIN = 1e-4
 PROX_MAX_ITER = 2000
+#: the rescue attempt (`OsqpBackend`, when the first attempt and its retry are refused):
+#: `bound_normalized_rows`' floor, and the limit-row excess up to which its answer goes to
+#: the planner's sampled check. The first attempt's floor 1e-3 gives the rows of
+#: near-stops (bounds 1e-6..1e-3 in ScaledLP units: 1159 of 1380 jerk-change rows of
+#: n-butterfly's first window) a tolerance up to 1000x their bound, and ADMM left them 6x
+#: outside after 20000 iterations; with 1e-6 that window converges to 0.5 % of HiGHS's
+#: objective. 5e-2: c-fourier-xc-3000pts' moving-start windows stopped 2-4 % outside
+#: their jerk rows in a dip to ~1e-4 of the velocity cap (no setting tried converged:
+#: eps, mu, 60000 iterations, columns rescaled by the iterate); the check and its repairs
+#: judge such a profile, where a refusal was a fallback for certain. Used for every
+#: window, 1e-6 / 5e-2 made cam-style-R50-a45-L200 5 % slower and 3-7x the compute
+#: (fast corpus, issue 13); as a rescue only, the windows that passed before are unchanged
+RESCUE_FLOOR = 1e-6
+RESCUE_VIOLATION = 5e-2
+#: the rescue's jerk-change rows (the regularizer, not a limit) are not judged: its
+#: answers stood 2-8x outside them on c-fourier-xc-3000pts; the sampled check judges the
+#: profile's jerk
+RESCUE_SOFT = np.inf
 
 
 @dataclass
@@ -163,6 +181,21 @@ class _RowSplit:
         return cls(rows[~soft], lower[~soft], upper[~soft], rows[soft], upper[soft])
 
 
+@dataclass
+class _Attempt:
+    """One OSQP set-up of a problem: the solver, its row split, lift and row keys, the
+    number of constraint rows (all, LP rows) and variables, and whether it is the rescue."""
+
+    solver: object
+    split: _RowSplit
+    lifted: Lifted | None
+    keys: np.ndarray | None
+    m_all: int
+    rows: int
+    size: int
+    rescue: bool
+
+
 class OsqpBackend:
     """OSQP on the scaled problem, lifted, made strongly convex, warm-started.
 
@@ -187,8 +220,13 @@ class OsqpBackend:
     also across windows, mapped onto this problem's variables by node position s
     (`ScaledLP.nodes`: a seam reuses the last grid's nodes) and onto its rows by
     `row_keys`; fresh nodes start at their lower bound with dual 0.
-    Off by default (measured before the lift on w-hoop-R40-band8-2mm: 2 % faster plans
-    for ~5x the compute).
+    On by default (issue 13: windows warm-started from the previous one's primal and
+    dual). Measured on the fast corpus against the same-size-only start (which, across
+    windows of equal node count, started from the last window's values by index): 0
+    fallbacks either way, winding time -12 % (n-butterfly) .. +0.6 %
+    (w-hel-R50-a45-sine-2mm-short), total OSQP compute ~0.65x (noisy machine). The
+    iterations of a warm window are about those of a cold one: the proximal re-centring
+    and the first solve's max_iter, not the start, set them.
 
     Acceptance (`_judge`): OSQP's answer z (clipped to the bounds) is judged on the rows
     themselves. Rows are split into the jerk-change regularizer (`regularizer_rows`) and
@@ -206,6 +244,14 @@ class OsqpBackend:
     (cam-style planned with 0), inf for the jerk-change rows the same two and cam-style
     44 % slower (zig-zag jerk, repairs).
 
+    Rescue (`rescue`): a retry refused without an infeasibility certificate gets a fresh
+    set-up with the rows normalized to their own bounds down to RESCUE_FLOOR, started at
+    the refused iterate; its answer is judged at RESCUE_VIOLATION with the jerk-change
+    rows not judged (RESCUE_SOFT), i.e. handed to the planner's sampled check, the
+    independent judge, instead of a certain fallback (fast corpus: the 3 fallbacks of
+    c-fourier-xc-3000pts and n-butterfly -> 0; see RESCUE_FLOOR). Windows accepted
+    before are untouched. Its duals are not kept for warm starts (other row scales).
+
     mu: proximal weight (scaled units). eps: OSQP eps_abs. bound_floor: see
     `bound_normalized_rows`. shrink: the inequality margin in unit-bound row units (off).
     """
@@ -219,7 +265,7 @@ class OsqpBackend:
         accept_violation: float = 1.5e-2,
         shrink: float = 0.0,
         accept_iterate: bool = True,
-        map_windows: bool = False,
+        map_windows: bool = True,
         lift: bool = True,
         polish: bool = True,
         eps_rel: float | None = 0.0,
@@ -229,7 +275,9 @@ class OsqpBackend:
         soft_violation: float = 2.0,
         prox_steps: int = 3,
         prox_mu: float = 0.1,
+        rescue: bool = True,
     ) -> None:
+        self.rescue = rescue
         self.prox_mu = prox_mu
         self.prox_steps = prox_steps
         self.soft_violation = soft_violation
@@ -250,10 +298,74 @@ class OsqpBackend:
         self._memory: _OsqpMemory | None = None
 
     def solve(self, lp: ScaledLP, z0: np.ndarray | None = None) -> LPOutcome:
+        n = lp.cost.size
+        att = self._setup(lp, self.bound_floor)
+        self._warm_start(att.solver, lp, att.keys, z0, att.lifted, att.m_all)
+        res = att.solver.solve(raise_error=False)
+        iterations = int(res.info.iter)
+        z, excess, converged, ok = self._judge(res, lp, att.split)
+        if not ok and self.retry and res.info.status_val not in _INFEASIBLE:
+            # once more from where it stopped (OSQP keeps its iterate), to a tighter
+            # tolerance and for longer: most answers refused for their row excess, and
+            # most stopped by max_iter, then pass (captured fast-corpus windows)
+            att.solver.update_settings(eps_abs=self.eps * RETRY_EPS, max_iter=self.max_iter)
+            res = att.solver.solve(raise_error=False)
+            iterations += int(res.info.iter)
+            z, excess, converged, ok = self._judge(res, lp, att.split)
+        if (not ok and self.rescue and res.info.status_val not in _INFEASIBLE
+                and self.bound_floor > RESCUE_FLOOR):
+            # rescue (see RESCUE_FLOOR): the rows rescaled to their own bounds down to
+            # near-stops, from the refused iterate, judged at RESCUE_VIOLATION
+            att = self._setup(lp, RESCUE_FLOOR)
+            x = np.clip(np.nan_to_num(np.asarray(res.x[:n], dtype=float))
+                        if res.x is not None else lp.lower, lp.lower, lp.upper)
+            att.solver.warm_start(x=att.lifted.extend(x) if att.lifted is not None else x)
+            res = att.solver.solve(raise_error=False)
+            iterations += int(res.info.iter)
+            z, excess, converged, ok = self._judge(res, lp, att.split, rescue=True)
+        split, solver, N = att.split, att.solver, att.size
+        if ok and self.prox_steps:
+            solver.update_settings(max_iter=PROX_MAX_ITER)
+        for _ in range(self.prox_steps if ok else 0):
+            # proximal point: the same QP centred at the accepted answer instead of the
+            # upper bounds, warm (OSQP keeps x and y). The centre at z_upper pulls the
+            # QP's optimum off the LP's where the feasible set has no greatest element
+            # (measured: 12 % objective gap on c-short-xy-0p5mm)
+            mu = self.mu * self.prox_mu
+            solver.update(q=np.r_[lp.cost - mu * z, np.zeros(N - n)],
+                          Px=np.full(n, mu))
+            again = solver.solve(raise_error=False)
+            iterations += int(again.info.iter)
+            z2, excess2, converged2, ok2 = self._judge(again, lp, split, att.rescue)
+            if not ok2 or float(lp.cost @ z2) >= float(lp.cost @ z) - PROX_GAIN * abs(
+                    float(lp.cost @ z)):
+                if ok2 and float(lp.cost @ z2) < float(lp.cost @ z):
+                    res, z, excess, converged = again, z2, excess2, converged2
+                break
+            res, z, excess, converged = again, z2, excess2, converged2
+        if ok and res.y is not None and np.all(np.isfinite(res.y)) and not att.rescue:
+            # (a rescue's duals belong to other row scales: not kept)
+            y = np.asarray(res.y, dtype=float)
+            m = att.rows
+            nodes = lp.nodes if lp.nodes is not None else np.arange(n, dtype=float)
+            self._memory = _OsqpMemory(
+                nodes, z * lp.q_scale, y[:n],
+                att.keys if att.keys is not None else np.empty((0, 3)), y[n:n + m],
+                y[n + m:])
+        status = (f"{res.info.status}{'' if converged else ' (iterate accepted)' if ok else ''}"
+                  f"{' (rescue)' if att.rescue else ''}"
+                  f" (worst row excess {excess:.1e} of its bound, jerk-change rows "
+                  f"{_relative_excess(split.soft, split.soft_hi, z):.1e})")
+        return LPOutcome(z * lp.q_scale, ok, status, iterations)
+
+    def _setup(self, lp: ScaledLP, floor: float) -> _Attempt:
+        """An OSQP solver set up on `lp`'s rows normalized with `floor`
+        (`bound_normalized_rows`), lifted, with the proximal QP centred at the upper
+        bounds; not warm-started."""
         import osqp
 
         n = lp.cost.size
-        rows, row_lo, row_hi = bound_normalized_rows(lp, self.bound_floor)
+        rows, row_lo, row_hi = bound_normalized_rows(lp, floor)
         # inequalities `shrink` inside (unit bounds), where the row is wide enough
         wide = (row_hi - row_lo) > 4.0 * self.shrink
         lo_in = np.where(wide & np.isfinite(row_lo), row_lo + self.shrink, row_lo)
@@ -285,54 +397,13 @@ class OsqpBackend:
         solver = osqp.OSQP()
         solver.setup(P, cost, A, lo, hi, **settings)
         keys = row_keys(rows.tocsr(), lp.nodes) if lp.nodes is not None else None
-        split = _RowSplit.of(rows, row_lo, row_hi)
-        self._warm_start(solver, lp, keys, z0, lifted, A.shape[0])
-        res = solver.solve(raise_error=False)
-        iterations = int(res.info.iter)
-        z, excess, converged, ok = self._judge(res, lp, split)
-        if not ok and self.retry and res.info.status_val not in _INFEASIBLE:
-            # once more from where it stopped (OSQP keeps its iterate), to a tighter
-            # tolerance and for longer: most answers refused for their row excess, and
-            # most stopped by max_iter, then pass (captured fast-corpus windows)
-            solver.update_settings(eps_abs=self.eps * RETRY_EPS, max_iter=self.max_iter)
-            res = solver.solve(raise_error=False)
-            iterations += int(res.info.iter)
-            z, excess, converged, ok = self._judge(res, lp, split)
-        if ok and self.prox_steps:
-            solver.update_settings(max_iter=PROX_MAX_ITER)
-        for _ in range(self.prox_steps if ok else 0):
-            # proximal point: the same QP centred at the accepted answer instead of the
-            # upper bounds, warm (OSQP keeps x and y). The centre at z_upper pulls the
-            # QP's optimum off the LP's where the feasible set has no greatest element
-            # (measured: 12 % objective gap on c-short-xy-0p5mm)
-            mu = self.mu * self.prox_mu
-            solver.update(q=np.r_[lp.cost - mu * z, np.zeros(N - n)],
-                          Px=np.full(n, mu))
-            again = solver.solve(raise_error=False)
-            iterations += int(again.info.iter)
-            z2, excess2, converged2, ok2 = self._judge(again, lp, split)
-            if not ok2 or float(lp.cost @ z2) >= float(lp.cost @ z) - PROX_GAIN * abs(
-                    float(lp.cost @ z)):
-                if ok2 and float(lp.cost @ z2) < float(lp.cost @ z):
-                    res, z, excess, converged = again, z2, excess2, converged2
-                break
-            res, z, excess, converged = again, z2, excess2, converged2
-        if ok and res.y is not None and np.all(np.isfinite(res.y)):
-            y = np.asarray(res.y, dtype=float)
-            m = rows.shape[0]
-            nodes = lp.nodes if lp.nodes is not None else np.arange(n, dtype=float)
-            self._memory = _OsqpMemory(
-                nodes, z * lp.q_scale, y[:n],
-                keys if keys is not None else np.empty((0, 3)), y[n:n + m],
-                y[n + m:])
-        status = (f"{res.info.status}{'' if converged else ' (iterate accepted)' if ok else ''}"
-                  f" (worst row excess {excess:.1e} of its bound, jerk-change rows "
-                  f"{_relative_excess(split.soft, split.soft_hi, z):.1e})")
-        return LPOutcome(z * lp.q_scale, ok, status, iterations)
+        return _Attempt(solver, _RowSplit.of(rows, row_lo, row_hi), lifted, keys,
+                        A.shape[0], rows.shape[0], N, floor < self.bound_floor)
 
-    def _judge(self, res, lp: ScaledLP, split: _RowSplit
+    def _judge(self, res, lp: ScaledLP, split: _RowSplit, rescue: bool = False
                ) -> tuple[np.ndarray, float, bool, bool]:
-        """(z clipped to the bounds, its worst limit-row excess, converged, accepted)."""
+        """(z clipped to the bounds, its worst limit-row excess, converged, accepted);
+        a rescue's answer is judged at RESCUE_VIOLATION and RESCUE_SOFT."""
         n = lp.cost.size
         converged = res.info.status_val in (1, 2)  # solved, solved inaccurate
         finite = res.x is not None and bool(np.all(np.isfinite(res.x)))
@@ -344,9 +415,12 @@ class OsqpBackend:
         if (finite and not certified and excess > 0.0 and excess <= self.pull_violation
                 and (converged or self.accept_iterate)):
             z, excess = _pull_inside(hard, lo_h, hi_h, lp.lower, z, excess)
-        soft_ok = (not np.isfinite(self.soft_violation)
-                   or _relative_excess(split.soft, split.soft_hi, z) <= self.soft_violation)
-        ok = (finite and excess <= self.accept_violation and soft_ok and not certified
+        soft_limit = max(self.soft_violation, RESCUE_SOFT) if rescue else self.soft_violation
+        soft_ok = (not np.isfinite(soft_limit)
+                   or _relative_excess(split.soft, split.soft_hi, z) <= soft_limit)
+        accept = max(self.accept_violation, RESCUE_VIOLATION) if rescue else \
+            self.accept_violation
+        ok = (finite and excess <= accept and soft_ok and not certified
               and (converged or self.accept_iterate))
         return z, excess, converged, ok
 
