@@ -321,7 +321,8 @@ class HeuristicPlanner:
                 layout.free_junctions, layout.levels, merge)
             info["zero_junction_rounds"] += int(not free)
             profile = build_profile(phases)
-            failing = failing_segments(profile, grid, starts, request.limits)
+            failing = failing_segments(profile, grid, starts, request.limits,
+                                       request.path)
             if not failing.any() and self.sampled_verify:
                 failing = sampled_failing_segments(request.path, profile, grid, starts,
                                                    request.limits, request.dt)
