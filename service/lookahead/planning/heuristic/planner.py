@@ -322,7 +322,7 @@ class HeuristicPlanner:
             info["zero_junction_rounds"] += int(not free)
             profile = build_profile(phases)
             failing = failing_segments(profile, grid, starts, request.limits,
-                                       request.path)
+                                       request.path, request.dt)
             if not failing.any() and self.sampled_verify:
                 failing = sampled_failing_segments(request.path, profile, grid, starts,
                                                    request.limits, request.dt)

@@ -44,17 +44,21 @@ def failing_cells(profile: FeedProfile, grid: PathGrid, lim: AxisLimits) -> np.n
 
 
 def failing_phase_ends(path: Path, profile: FeedProfile, grid: PathGrid,
-                       lim: AxisLimits) -> np.ndarray:
-    """(ncell,) True where some axis exceeds `lim` at the start or the end of a
-    constant-jerk piece of the profile inside the cell (with that piece's jerk).
+                       lim: AxisLimits, dt: float) -> np.ndarray:
+    """(ncell,) True where the finite differences of PROTOCOL.md "Limits" exceed `lim`
+    around the start or the end of a constant-jerk piece of the profile in the cell.
 
     Within a piece the path jerk is constant while v and a change, so the axis jerk
     x_sss v^3 + 3 x_ss v a + x_s j is largest near the piece's ends; where those lie
     between the cell's points the grid check misses the peak (found by hypothesis: a
-    2 mm cell, axis jerk 60,456 at the end of a braking phase against 60,000, 59,258
-    at the nearest grid point). Ends within a quarter cell of a corner or a C1 knot are
-    left to the grid's points (one-sided derivatives there, `_retreat_from_corners`)."""
+    2 mm cell, axis jerk 60,456 at the end of a braking phase against 60,000, 59,258 at
+    the nearest grid point). The chain-rule terms at the piece ends only propose places:
+    a peak shorter than a sample (a 0.05 mm blend crossed in 2 ms) or at a knot where x_ss
+    jumps (one-sided derivatives) is not what the checker sees, so each proposed place is
+    judged by the checker's own test, on positions sampled around it at four phases of dt
+    (the differences whose samples all lie inside the profile)."""
     ncell = grid.ncells
+    out = np.zeros(ncell, dtype=bool)
     pp = profile.s_of_t
     h = np.diff(pp.x)
     c = pp.c
@@ -65,44 +69,45 @@ def failing_phase_ends(path: Path, profile: FeedProfile, grid: PathGrid,
     v = (3.0 * c0 * tau + 2.0 * c1) * tau + c2
     a = 6.0 * c0 * tau + 2.0 * c1
     j = 6.0 * c0
-    lo, hi = float(grid.edges[0]), float(grid.edges[-1])
-    cell = np.clip(np.searchsorted(grid.edges, s, side="right") - 1, 0, ncell - 1)
-    keep = (s >= lo) & (s <= hi)
-    width = np.diff(grid.edges)[cell]
-    corners = grid.edges[1:][grid.corner_after]
-    if corners.size:
-        near = np.searchsorted(corners, s)
-        gap = np.minimum(np.abs(s - corners[np.clip(near - 1, 0, corners.size - 1)]),
-                         np.abs(s - corners[np.clip(near, 0, corners.size - 1)]))
-        keep &= gap > 0.25 * width
-    # the same at a C1 knot (in a cell of jerk_scale < 1, at one of its edges): x_ss and
-    # x_sss jump there, the phases of a feed cap change end on it, and one side's
-    # derivatives say nothing of the other; the knot's own allowance (jerk_scale,
-    # c1_cap) covers the finite-difference jerk of the jump
-    knot_cell = grid.jerk_scale[cell] < 1.0
-    rel = (s - grid.edges[cell]) / np.maximum(width, 1e-300)
-    keep &= ~knot_cell | ((rel > 0.25) & (rel < 0.75))
-    out = np.zeros(ncell, dtype=bool)
-    if not keep.any():
-        return out
-    s, v, a, j, cell = (x[keep] for x in (s, v, a, j, cell))
+    t_end = np.concatenate([pp.x[:-1], pp.x[:-1]]) + tau - pp.x[0]
     _, xs, xss, xsss = path.eval_s(s, order=3)
     v, a, j = v[:, None], a[:, None], j[:, None]
-    jmax = lim.jmax * grid.jerk_scale[cell][:, None]
     bad = (np.abs(xs * v) > lim.vmax).any(axis=1)
     bad |= (np.abs(xss * (v * v) + xs * a) > lim.amax).any(axis=1)
-    bad |= (np.abs(xsss * (v * v * v) + xss * (3.0 * v * a) + xs * j) > jmax).any(axis=1)
-    out[cell[bad]] = True
+    bad |= (np.abs(xsss * (v * v * v) + xss * (3.0 * v * a) + xs * j) > lim.jmax).any(axis=1)
+    if not bad.any():
+        return out
+    t0, s0 = t_end[bad], s[bad]
+    # positions at t0 + (k + phase / 4) dt, k = -3..3: every difference of order 1..3
+    # whose window holds t0, at each phase
+    k = np.arange(-3, 4)
+    phase = np.arange(4) / 4.0
+    times = t0[:, None, None] + (k[None, None, :] + phase[None, :, None]) * dt
+    pos = path.eval_s(profile.at(times.ravel())[0], order=0)[0]
+    pos = pos.reshape(*times.shape, -1)
+    inside = (times >= 0.0) & (times <= profile.duration)
+    over = np.zeros(t0.size, dtype=bool)
+    d = pos
+    ok = inside
+    for order, limit in ((1, lim.vmax), (2, lim.amax), (3, lim.jmax)):
+        d = np.diff(d, axis=2)
+        ok = ok[:, :, 1:] & ok[:, :, :-1]
+        ratio = np.max(np.abs(d) / (dt**order * limit), axis=3)
+        over |= np.any(ok & (ratio > 1.0 + 1e-9), axis=(1, 2))
+    if over.any():
+        cell = np.clip(np.searchsorted(grid.edges, s0[over], side="right") - 1, 0, ncell - 1)
+        out[cell] = True
     return out
 
 
 def failing_segments(profile: FeedProfile, grid: PathGrid, starts: np.ndarray,
-                     lim: AxisLimits, path: Path | None = None) -> np.ndarray:
+                     lim: AxisLimits, path: Path | None = None, dt: float = 0.0
+                     ) -> np.ndarray:
     """(nseg,) True where some cell of the segment fails (`failing_cells`, and with the
-    path also `failing_phase_ends`)."""
+    path and the sample time dt (s) also `failing_phase_ends`)."""
     bad = failing_cells(profile, grid, lim)
-    if path is not None:
-        bad |= failing_phase_ends(path, profile, grid, lim)
+    if path is not None and dt > 0.0:
+        bad |= failing_phase_ends(path, profile, grid, lim, dt)
     return np.logical_or.reduceat(bad, starts[:-1])
 
 
