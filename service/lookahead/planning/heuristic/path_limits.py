@@ -13,6 +13,7 @@ evaluated at three budget points (just inside both ends and the middle) and two 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -59,6 +60,8 @@ class PathGrid:
     BUDGET_FRACTIONS + CHECK_FRACTIONS of each cell. jerk_scale: (ncell,) factor <= 1 on
     jmax for cells next to a C1 knot. c1_cap: (ncell,) feed cap from C1 knots (inf if none).
     corner_after: (ncell,) True where the path has a corner at the cell's right end.
+    lead_cells: how many cells the leading node interval for the start state
+    (`lead_length`) has (0: none).
     """
 
     edges: np.ndarray
@@ -69,6 +72,7 @@ class PathGrid:
     jerk_scale: np.ndarray
     c1_cap: np.ndarray
     corner_after: np.ndarray
+    lead_cells: int = 0
 
     @property
     def ncells(self) -> int:
@@ -171,15 +175,49 @@ def _refine_cells(path: Path, cells: _Cells, corner_node: np.ndarray) -> _Cells:
     return cells
 
 
+def lead_length(v0: float, a0: float, jerk: float) -> float:
+    """Length (path units) of a leading cell in which a start state (v0 > 0, a0 < 0:
+    decelerating) at path jerk `jerk` turns its acceleration to 0: LEAD_FACTOR times the
+    distance of that turn and of the rise back to v0 (0 for a start that is not
+    decelerating).
+
+    A planning segment's jerk budget falls with its cruise cap, and a start on a brake to
+    rest (a replan from the end of the last plan's window) turns only under at least the
+    jerk a0^2 / (2 v0) of that brake; where the first segment's budget is lower, the
+    planner caps the leading cell at the start feed (which raises its jerk budget), where a
+    cap on the whole first segment made it crawl (cam-style path: 123 s from v0 = 0.46)."""
+    if not (v0 > 0.0 and a0 < 0.0 and jerk > 0.0):
+        return 0.0
+    t1 = -a0 / jerk
+    v1 = max(v0 - a0 * a0 / (2.0 * jerk), 0.0)
+    # (a start that would stop before a = 0 at this jerk: an overestimate of its stop)
+    d1 = max(v0 * t1 + a0 * t1 * t1 / 2.0 + jerk * t1**3 / 6.0, 0.0)
+    d2 = (v0 + v1) * math.sqrt((v0 - v1) / jerk)  # back to v0: (v0 + v1) / 2 * 2 sqrt(dv / J)
+    return LEAD_FACTOR * (d1 + d2)
+
+
+#: path jerk assumed for the leading cell's length, as a share of min jmax / |x_s| at the
+#: start (about the budget left beside the coupling share 3 |x_ss| v a at a low cap; a
+#: lower share: a longer leading cell), and the cell's length in those distances (the
+#: time spent in the cell below the start feed is about this many times the motion's;
+#: 1.5 with 0.6 was too short for some replans on the braking below). Measured on
+#: replans from the brakes to rest of cam-style-R50-a45-L200
+LEAD_JERK_SHARE = 0.6
+LEAD_FACTOR = 2.0
+
+
 def build_grid(path: Path, s_begin: float, s_end: float, dt: float, limits: AxisLimits,
                shares: BudgetShares, feed_cap: FeedCap | None = None,
-               max_cell: float | None = None) -> PathGrid:
+               max_cell: float | None = None,
+               start: tuple[float, float] | None = None) -> PathGrid:
     """Cells and their geometry; cells are at most `max_cell` long (default: the path
     length / 2000: a fixed length, so windows of one path share their cell layout).
 
     Cells are laid out in u between nodes whose arc length is exact (window ends, corners,
     knots, feed-cap breaks); arc lengths inside a node interval come from the speeds at the
-    cell points and are rescaled to the node interval's exact length."""
+    cell points and are rescaled to the node interval's exact length. `start` (feed,
+    acceleration at s_begin): a decelerating start gets a short leading cell
+    (`lead_length`)."""
     span = s_end - s_begin
     pad = _TINY * max(span, 1.0)
     corners = _inside(path.corners_s(), s_begin, s_end, pad)
@@ -187,6 +225,19 @@ def build_grid(path: Path, s_begin: float, s_end: float, dt: float, limits: Axis
     caps = _inside(feed_cap.s_breaks, s_begin, s_end, pad) if feed_cap is not None else []
     nodes = np.unique(np.concatenate([[s_begin, s_end], corners, knots, caps]))
     nodes_u = _u_of_nodes(path, nodes)
+    lead = 0.0
+    if start is not None and start[0] > 0.0 and start[1] < 0.0:
+        _, xs0, _, _ = s_derivatives_at_u(path, nodes_u[:1])
+        with np.errstate(divide="ignore"):
+            jerk = LEAD_JERK_SHARE * float(np.min(limits.jmax / np.abs(xs0[0])))
+        lead = lead_length(start[0], start[1], jerk)
+        # only well inside the first node interval (else its node already is near)
+        if lead > pad and s_begin + lead < nodes[0] + 0.9 * (nodes[1] - nodes[0]):
+            node = np.array([s_begin + lead])
+            nodes = np.concatenate([nodes[:1], node, nodes[1:]])
+            nodes_u = np.concatenate([nodes_u[:1], path.u_of_s(node), nodes_u[1:]])
+        else:
+            lead = 0.0
     c1_s, c1_caps = np.empty(0), np.empty(0)
     if path.continuity() < 2:
         nodes, nodes_u, c1_s, c1_caps = _c1_knot_zones(path, nodes, nodes_u, knots, corners,
@@ -234,7 +285,8 @@ def build_grid(path: Path, s_begin: float, s_end: float, dt: float, limits: Axis
         corner_before = np.zeros(ncell, dtype=bool)
         corner_before[np.searchsorted(edges, corners - pad)] = True
         _retreat_from_corners(s, xs, xss, xsss, corner_before, corner_after)
-    return PathGrid(edges, s, xs, xss, xsss, jerk_scale, c1_cap, corner_after)
+    lead_cells = int(np.count_nonzero(cell_node == 0)) if lead > 0.0 else 0
+    return PathGrid(edges, s, xs, xss, xsss, jerk_scale, c1_cap, corner_after, lead_cells)
 
 
 def _retreat_from_corners(s: np.ndarray, xs: np.ndarray, xss: np.ndarray, xsss: np.ndarray,
@@ -351,10 +403,16 @@ def choose_segments(grid: PathGrid, vlim: np.ndarray, band_ratio: float = 1.25) 
 
     Cells are grouped into bands of the feed limit (a factor `band_ratio` wide, centred on
     an absolute feed); a segment is a maximal run of cells in one band, also cut at
-    corners. A straight stroke of any number of points is one segment.
+    corners. A straight stroke of any number of points is one segment; a single short
+    leading cell (`PathGrid.lead_cells`) belongs to the segment after it (a longer leading
+    interval is cut into cells of the usual length, banded as any others: forced into the
+    band after them, 70 cells of a braking start on the B-spline corners took a 6 mm
+    segment's cap from the corner ahead).
     """
     # bands anchored at 1 path unit/s, so a window cuts the path where the whole job would
     band = np.floor(np.log(np.minimum(vlim, 1e300)) / np.log(band_ratio))
+    if grid.lead_cells == 1 and band.size > 1:
+        band[0] = band[1]
     cut = band[1:] != band[:-1]
     cut |= grid.corner_after[:-1]
     starts = np.concatenate([[0], np.nonzero(cut)[0] + 1, [grid.ncells]])
@@ -410,3 +468,30 @@ def segment_budgets(grid: PathGrid, starts: np.ndarray, vlim: np.ndarray,
     s0 = grid.edges[starts[:-1]]
     L = grid.edges[starts[1:]] - s0
     return SegmentBudgets(s0, L, V, A * factor, J * factor)
+
+
+def level_accelerations(grid: PathGrid, starts: np.ndarray, V: np.ndarray, J: np.ndarray,
+                        limits: AxisLimits, shares: BudgetShares) -> np.ndarray:
+    """Per segment the largest path acceleration A that keeps every axis term within
+    its limit at every budget point for any v <= V[k], |a| <= A, |j| <= J[k]:
+    A = min (amax - |x_ss| V^2) / |x_s| and (jmax - |x_sss| V^3 - |x_s| J) / (3 |x_ss| V).
+    Unlike `segment_budgets` (which caps the coupling 3 |x_ss| V A at its share of jmax
+    and gives the rest to J), the jerk budget J is given and the coupling takes what is
+    left: below a segment's cruise cap the geometric term and the coupling per unit of
+    acceleration shrink, so a feed level keeps its segment's J with a larger A."""
+    nseg = starts.size - 1
+    seg_of_cell = np.repeat(np.arange(nseg), np.diff(starts))
+    nb = BUDGET_FRACTIONS.size
+    ncell = grid.ncells
+    xs, xss, xsss = (np.abs(x[:, :nb, :]).reshape(ncell, -1)
+                     for x in (grid.xs, grid.xss, grid.xsss))
+    amax = np.tile(limits.amax, nb) * shares.headroom
+    jmax = np.tile(limits.jmax, nb) * grid.jerk_scale[:, None] * shares.headroom
+    Vc = V[seg_of_cell][:, None]
+    Jc = J[seg_of_cell][:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a_cell = np.where(xs > 0, (amax - xss * Vc**2) / xs, np.inf)
+        a_cell = np.minimum(a_cell, np.where(xss > 0, (jmax - xsss * Vc**3 - xs * Jc)
+                                             / (3.0 * xss * Vc), np.inf))
+    return np.minimum.reduceat(_min_over_columns(a_cell), starts[:-1])
+

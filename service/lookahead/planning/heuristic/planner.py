@@ -29,7 +29,13 @@ import numpy as np
 
 from lookahead.limits import AxisLimits
 from lookahead.planning.base import FeedProfile, PathState, PlanningError, PlanRequest, PlanResult
-from lookahead.planning.heuristic.brake import BRAKE_TARGETS, Brake, phases_end, state_scale
+from lookahead.planning.heuristic.brake import (
+    BRAKE_TARGETS,
+    Brake,
+    first_cells,
+    phases_end,
+    state_scale,
+)
 from lookahead.planning.heuristic.levels import LEVEL_FRACTIONS, FeedLevels, level_budgets
 from lookahead.planning.heuristic.path_limits import (
     BudgetShares,
@@ -77,6 +83,10 @@ FIRST_PASS_ROUNDS = 2
 #: replan braking at a = -883 merged 180 segments of the wide layout, 0.67 s, to fail; the
 #: merged zero-junction plans won no layout on the fast corpus's replans)
 MERGE_IN_OTHER_LAYOUTS = False
+#: band ratio of the layouts replanned where no layout plans from a moving start
+#: (`HeuristicPlanner._rescue_plan`; 1.1: both refused replan-continuity states of the fast
+#: corpus planned, with the coarse and the wide shares; only runs where the plan failed)
+RESCUE_BAND_RATIO = 1.1
 #: free-junction chains tried per round while leading segments are merged for a start
 #: state that cannot stop in the first one (a compute bound: on a polar dome a replan
 #: merged 60 times, each chain failing, 1.2 s; the merges are for the zero-junction plan)
@@ -212,7 +222,7 @@ class HeuristicPlanner:
         if start.v < 0 or request.v_end < 0:
             raise PlanningError("feeds must be >= 0")
         limits = request.limits.scaled(self.margin)
-        grid, vlim = self._grid(request, start.s, limits)
+        grid, vlim = self._grid(request, start, limits)
         first_problem = ""
         if not request.start.v > vlim[0] / self.margin:
             try:
@@ -224,16 +234,23 @@ class HeuristicPlanner:
                 if not self.brake_within_limits and state_scale(request, grid) <= 1.0:
                     raise
                 first_problem = str(exc)  # perhaps the start acceleration is too high
+                rescued = self._rescue_plan(request, grid, limits)
+                if rescued is not None:
+                    return self._result(build_profile(rescued[0]), t_start, rescued[1])
         # brake to the limits first; if the rest cannot follow from there (the window is
         # too short for that feed), brake to a lower feed
         problem = ""
         for fraction in BRAKE_TARGETS:
-            brake, g = self._brake.brake(request, grid, vlim, limits, fraction)
+            try:
+                brake, g = self._brake.brake(request, grid, vlim, limits, fraction)
+            except PlanningError as exc:
+                problem = str(exc)
+                break
             end = phases_end(brake)
             if not end.s < s_end:
                 break
             rest = replace(request, start=end)
-            rest_grid, rest_vlim = self._grid(request, end.s, limits)
+            rest_grid, rest_vlim = self._grid(request, end, limits)
             try:
                 phases, core = self._plan_phases(rest, rest_grid, rest_vlim, limits)
             except PlanningError as exc:
@@ -241,14 +258,25 @@ class HeuristicPlanner:
                 continue
             info = {"brake_scale": g, "brake_target": fraction, **core}
             return self._result(build_profile(concat_phases([brake, phases])), t_start, info)
+        if request.start.v > vlim[0] / self.margin and \
+                not request.start.v > self._start_limit(request, grid, vlim, limits) / self.margin:
+            # above the default shares' limit only: a wider layout's plan may go on from it
+            try:
+                phases, core = self._plan_phases(request, grid, vlim, limits)
+                return self._result(build_profile(phases), t_start, core)
+            except PlanningError as exc:
+                problem = f"{problem} {exc}"
+        if problem.startswith("no brake within the limits") or \
+                problem.startswith("the start state (v="):
+            raise PlanningError(problem)
         raise PlanningError("the start state cannot slow down to the limits within the "
                             f"window [{start.s}, {s_end}]: {first_problem} {problem}")
 
     # --- steps ------------------------------------------------------------------------
-    def _grid(self, request: PlanRequest, s_begin: float,
+    def _grid(self, request: PlanRequest, start: PathState,
               limits: AxisLimits) -> tuple[PathGrid, np.ndarray]:
-        grid = build_grid(request.path, s_begin, request.s_end, request.dt, limits,
-                          self.shares, request.feed_cap, self.max_cell)
+        grid = build_grid(request.path, start.s, request.s_end, request.dt, limits,
+                          self.shares, request.feed_cap, self.max_cell, (start.v, start.a))
         return grid, feed_limit(grid, limits, self.shares, request.feed_cap)
 
     def _plan_phases(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
@@ -289,6 +317,43 @@ class HeuristicPlanner:
             raise PlanningError(problem)
         self._last_layout = best[1]["layout"]
         return best[0], best[1]
+
+    def _start_limit(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
+                     limits: AxisLimits) -> float:
+        """The feed limit at the start under the most permissive layout's shares: a
+        replan starts on the last plan, which a layout with wider shares than the
+        planner's own may have made (n-circle-R30: 205 mm/s under the wide shares, above
+        the default shares' limit; taken for a start above the limits, its brake failed).
+        Such a start is planned directly where no brake plans it (planned directly first,
+        the engine's keep-distance replans on a wavy path took 3 % longer)."""
+        head = first_cells(grid, 1)
+        return max([float(vlim[0])] + [float(feed_limit(head, limits, L.shares,
+                                                         request.feed_cap)[0])
+                                       for L in self.layouts if L.shares != self.shares])
+
+    def _rescue_plan(self, request: PlanRequest, grid: PathGrid, limits: AxisLimits
+                     ) -> tuple[Phases, dict] | None:
+        """From a moving start no layout planned: the layouts again with the finer bands
+        RESCUE_BAND_RATIO (no segment-count bound), the fastest verified profile, or None.
+        A start on the last plan's own brake can lie a hair above this window's budgets,
+        which other cells and segments give (B-spline corners, butterfly: v ~ 60-100
+        mm/s braking at 400-500 mm/s^2 towards a corner; refused by every layout); finer
+        bands give segments caps and budgets closer to the local limit curve."""
+        best = None
+        for layout in self.layouts:
+            if not layout.band_ratio > RESCUE_BAND_RATIO or not layout.free_junctions:
+                continue
+            fine = replace(layout, band_ratio=RESCUE_BAND_RATIO, max_segments=None)
+            lim = feed_limit(grid, limits, fine.shares, request.feed_cap)
+            try:
+                phases, info = self._plan_layout(request, grid, lim, limits, fine,
+                                                 FIRST_PASS_ROUNDS)
+            except PlanningError:
+                continue
+            duration = float(np.sum(phases.duration))
+            if best is None or duration < best[2]:
+                best = (phases, {**info, "rescue": True}, duration)
+        return None if best is None else best[:2]
 
     def _layout_plan(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
                      limits: AxisLimits, i: int, rounds: int, merge: bool
@@ -348,8 +413,10 @@ class HeuristicPlanner:
         """The phases of one round: the free-junction chain, else zero junctions. If the
         start state cannot reach a valid end state within the first segment, its cruise
         cap is first lowered to the start feed (which raises its acceleration and jerk
-        budgets), then leading segments are merged (if `merge`; else PlanningError)."""
+        budgets; only over the grid's leading cells where it has them, cut off as a segment
+        of its own), then leading segments are merged (if `merge`; else PlanningError)."""
         lowered = False
+        lead_cut = False
         v_cap = None
         tries = 0
         while True:
@@ -370,9 +437,14 @@ class HeuristicPlanner:
                                             self.margin)
                 return concat_phases(parts), starts, factor, False
             except SegmentInfeasibleError:
-                v_cap = np.full(starts.size - 1, np.inf)
                 if not lowered and request.start.v > 0:
                     lowered = True
+                    n_lead = grid.lead_cells
+                    if n_lead and not lead_cut and starts[1] > n_lead:
+                        lead_cut = True
+                        starts = np.insert(starts, 1, n_lead)
+                        factor = np.insert(factor, 0, factor[0])
+                    v_cap = np.full(starts.size - 1, np.inf)
                     v_cap[0] = request.start.v
                 elif not merge:
                     raise PlanningError("heuristic: the start state cannot stop in the "
@@ -384,7 +456,7 @@ class HeuristicPlanner:
                     lowered = False
                     starts = np.delete(starts, 1)
                     factor = np.delete(factor, 1)
-                    v_cap = v_cap[1:]
+                    v_cap = np.full(starts.size - 1, np.inf)
 
     def _free_parts(self, request: PlanRequest, grid: PathGrid, starts: np.ndarray,
                     b, levels: FeedLevels | None = None) -> list[Phases] | None:

@@ -111,7 +111,7 @@ def rise_levels(s0: float, L: float, v0: float, a0: float, tops: list[float],
                 m += 1
                 continue
         # on the ceiling: hold accs[m] up to v_line, then ramp down along the line
-        if v < v_line and q >= qa * (1.0 - 1e-12):
+        if v < v_line and q >= qa - qtol:  # on the ceiling (the tolerance of `climbing`)
             x = min(v_line, hi)
             pieces.append((0.0, accs[m], accs[m], v, x))
             v, q = x, qa

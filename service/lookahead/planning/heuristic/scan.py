@@ -12,9 +12,11 @@ junction k is the start of segment k (junction nseg is the window's end) and has
    above a cap it restarts there at (cap, 0) (a critical point of the feed-limit curve),
    and the motion from the restart to the next state is solved by Ruckig. Where that
    fails (the next state is out of reach from the cap within the segment), with feed
-   levels: forward rises from the restart until Ruckig lands one on the scan, or one
-   Ruckig motion over several segments; the zero-acceleration junction feeds (from which
-   forward rises are tried once more) are the last resort.
+   levels: forward rises from the restart until Ruckig lands one on the scan (where a
+   rise would overshoot it, over several segments from one of its last states), or one
+   Ruckig motion over several segments, or forward rises from a restart below the cap;
+   the zero-acceleration junction feeds (from which forward rises are tried once more)
+   are the last resort.
 2. Forward chain from the start state: in each segment the fastest rise (full acceleration
    towards V) is taken while it stays below the backward scan and can still reach the
    backward state one junction further (a Ruckig segment, kept for the next step);
@@ -130,6 +132,8 @@ def backward_scan(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: n
             args = (solver, b, cap, A, J, levels, solve, out, motions, soft, k)
             if _rises_onto(args, False) or _merge_onto(b, cap, solve, out, motions, k):
                 continue
+            if _restart_lower(args, c, float(w[k])):
+                continue
             out[k] = w[k], 0.0
             if _rises_onto(args, True):
                 continue
@@ -149,39 +153,67 @@ def backward_scan(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: n
     return out, motions
 
 
+#: restart feeds tried below a cap where no rise from the cap lands on the scan, as
+#: fractions of the cap (above the zero-acceleration feed, the last resort): the rise from
+#: a lower feed accelerates for longer before it meets a falling scan (butterfly: a
+#: restart at 48 mm/s fell back to 19). More fractions: closer to the highest restart
+#: that lands, for one `_rise_onto` each where the cap fails
+RESTART_FRACTIONS = (0.9, 0.75, 0.55)
+
+
+def _restart_lower(args: tuple, c: float, w: float) -> bool:
+    """In place (via `_rise_onto`): the state at junction k (`args`) restarted at
+    (f c, 0) for f in RESTART_FRACTIONS above w, the first whose forward rises land on the
+    scan; False (the state left at the last try) if none does."""
+    out, k = args[7], args[10]
+    for f in RESTART_FRACTIONS:
+        if not f * c > w:
+            break
+        out[k] = f * c, 0.0
+        if _rises_onto(args, True):
+            return True
+    return False
+
+
 def _merge_onto(b: SegmentBudgets, cap: np.ndarray, solve, out: np.ndarray, motions: list,
                 k: int) -> bool:
     """In place: one Ruckig motion from the restart state at junction k over segments
     k .. k + m - 1 onto the scan's state at junction k + m (m = 2 .. MAX_MERGE), split into
     per-segment motions and the states at the junctions between; False if none exists.
     (A scan state just after a short segment, decelerating hard above the cap before it,
-    is reachable only by a motion over several segments.) The motion must pass each
-    junction within its cap (0 at a corner: no merge across it)."""
+    is reachable only by a motion over several segments.)"""
     n = b.L.size
-    for m in range(2, min(MAX_MERGE, n - k) + 1):
-        if cap[k + m - 1] <= 0.0:
-            break
-        motion = solve(k, out[k], out[k + m], m)
-        if motion is None:
-            continue
-        parts, states = [], []
-        for i in range(k + 1, k + m):
-            got = split_at(motion, float(b.s0[i]))
-            if got is None:
-                break
-            first, motion, v, a = got
-            if v > cap[i] * (1 + _REL):
-                break
-            parts.append(first)
-            states.append((v, a))
-        else:
-            parts.append(motion)
-            for i, part in enumerate(parts):
-                motions[k + i] = part
-            for i, state in enumerate(states):
-                out[k + 1 + i] = state
-            return True
-    return False
+    return any(_merge_span(b, cap, solve, out, motions, k, m)
+               for m in range(2, min(MAX_MERGE, n - k) + 1))
+
+
+def _merge_span(b: SegmentBudgets, cap: np.ndarray, solve, out: np.ndarray, motions: list,
+                k: int, m: int) -> bool:
+    """In place: one Ruckig motion from the state at junction k over segments
+    k .. k + m - 1 onto the state at junction k + m, split into per-segment motions and
+    the states at the junctions between; False (nothing changed) if there is none. The
+    motion must pass each junction within its cap (0 at a corner: no merge across it)."""
+    if np.any(cap[k + 1:k + m] <= 0.0):
+        return False
+    motion = solve(k, out[k], out[k + m], m)
+    if motion is None:
+        return False
+    parts, states = [], []
+    for i in range(k + 1, k + m):
+        got = split_at(motion, float(b.s0[i]))
+        if got is None:
+            return False
+        first, motion, v, a = got
+        if v > cap[i] * (1 + _REL):
+            return False
+        parts.append(first)
+        states.append((v, a))
+    parts.append(motion)
+    for i, part in enumerate(parts):
+        motions[k + i] = part
+    for i, state in enumerate(states):
+        out[k + 1 + i] = state
+    return True
 
 
 def _rises_onto(args: tuple, try_first: bool) -> bool:
@@ -198,8 +230,10 @@ def _rise_onto(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, A: np.n
                pass_soft: bool = True) -> bool | None:
     """In place: the states after a restart at junction k that Ruckig cannot connect to
     the scan's next state, from forward rises out of the restart state (fastest first, under
-    the feed levels) until Ruckig lands one on the scan; False (nothing changed) if no rise
-    does (None if it failed without passing a soft state). The forward-reachable states
+    the feed levels, gentler where the fastest would overshoot the scan's next states:
+    `_land_gently`) until Ruckig lands one on the scan (where a rise cannot stay below it,
+    over several segments: `_land_back`); False (nothing changed) if no rise does (None if
+    it failed without passing a soft state). The forward-reachable states
     replace the zero-acceleration feeds the scan would otherwise fall back to (after a
     near-cusp they held the rise at a = 0 per segment).
 
@@ -233,7 +267,11 @@ def _rise_onto(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, A: np.n
             got = _rise(solver, float(b.s0[i]), float(b.L[i]), x[0], x[1],
                         min(float(b.V[i]), float(target[0])), float(A[i]), Ji)
         if got is None or (hard and got[1] > target[0] * (1 + _REL)):
+            if _land_back(b, cap, solve, out, motions, k, i):
+                return True
             break
+        if i + 2 <= n and not (pass_soft and soft[i + 2]):
+            got = _land_gently(solver, b, i, x, got, target, out[i + 2], A, J)
         out[i + 1] = got[1], got[2]
         soft[i + 1] = True
         motions[i] = got[0]
@@ -242,6 +280,50 @@ def _rise_onto(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, A: np.n
     motions[:] = saved[1]
     soft[:] = saved[2]
     return False if passed else None
+
+
+#: a forward rise of `_rise_onto` that overshoots the scan lands on it by one Ruckig motion
+#: from one of its last LAND_BACK junction states onto one of the scan's next LAND_AHEAD
+#: states (a compute bound: up to LAND_BACK * LAND_AHEAD Ruckig calls where a rise fails)
+LAND_BACK, LAND_AHEAD = 4, 4
+
+
+def _land_back(b: SegmentBudgets, cap: np.ndarray, solve, out: np.ndarray, motions: list,
+               k: int, i: int) -> bool:
+    """In place: where the forward rise from the restart at junction k, at junction i,
+    cannot stay below the scan, one Ruckig motion (`_merge_span`) from a rise state at a
+    junction j in i, i - 1, ... (back to k) onto the scan's state at a junction after i;
+    False if none exists. (The rise accelerates as hard as it may and meets a falling scan
+    with too much acceleration to turn within one segment: after a restart below a
+    near-cusp on the butterfly, the rise from the cap met the deceleration into it.)"""
+    n = b.L.size
+    for j in range(i, max(k, i - LAND_BACK + 1) - 1, -1):
+        for t in range(i + 1, min(n, i + LAND_AHEAD) + 1):
+            if (j, t) == (i, i + 1):
+                continue  # tried by `_rise_onto` itself
+            if _merge_span(b, cap, solve, out, motions, j, t - j):
+                return True
+    return False
+
+
+def _land_gently(solver: SCurveSolver, b: SegmentBudgets, i: int, x: tuple[float, float],
+                 got: tuple[Phases, float, float], target: np.ndarray, after: np.ndarray,
+                 A: np.ndarray, J: np.ndarray) -> tuple[Phases, float, float]:
+    """A forward rise of `_rise_onto` in segment i, or instead the rise towards the scan's
+    feed at junction i + 1 where the fast one arrives there with more acceleration than
+    the feed left below the scan's next state (`after`, at i + 2) can absorb: its
+    overshoot v + a^2 / (2 J) above that feed made the next step fail (butterfly: rises
+    after a near-cusp broke off, and the scan fell back to zero-acceleration feeds for
+    40 segments). The gentle rise is taken only where it overshoots less."""
+    Jn = float(J[i + 1])
+    over = got[1] + max(got[2], 0.0) ** 2 / (2.0 * Jn)
+    if over <= float(after[0]) * (1 + _REL):
+        return got
+    gentle = _rise(solver, float(b.s0[i]), float(b.L[i]), x[0], x[1],
+                   min(float(b.V[i]), float(target[0])), float(A[i]), float(J[i]))
+    if gentle is None or gentle[1] > target[0] * (1 + _REL):
+        return got
+    return gentle if gentle[1] + max(gentle[2], 0.0) ** 2 / (2.0 * Jn) < over else got
 
 
 #: landing points tried on the first segment's scan motion (fractions of its length,
