@@ -476,3 +476,61 @@ def test_an_empty_window_is_a_planning_error_not_a_crash():
     s = path.length / 2
     with pytest.raises(PlanningError, match="must exceed"):
         LPPlanner().plan(PlanRequest(path, MACHINE.limits, PathState(s), s, dt=MACHINE.dt))
+
+
+# the braking into a window's end at low feed (path units / s, / s^2): replan states of
+# bench/replan_continuity.py on w-issue-tube1450 and cam-fp-hoop, all refused before
+LOW_FEED_BRAKING = [(6.24, -359.7), (3.10, -265.4), (1.14, -167.4), (0.70, -116.0)]
+
+
+@pytest.mark.parametrize(("v0", "a0"), LOW_FEED_BRAKING)
+def test_braking_start_at_low_feed_never_reverses(tube, v0, a0):
+    """Used to fail the checker (1.1-40x jmax): from such a state the feed must bottom out
+    within ~0.05 mm, inside the LP's first grid interval (~6 mm), whose quintic from the
+    start state reversed (ds/dt down to -0.67 mm/s) and the sampler's held s became a jerk
+    spike. Now the braking is released in closed form first (`lp.release`)."""
+    limits = MACHINE.limits.scaled(0.98)
+    _, J = path_limits(tube, limits)
+    assert v0 >= a0**2 / (2.0 * J)  # a state that can stop without reversing
+    start = PathState(900.0, v0, a0)
+    res = LPPlanner().plan(PlanRequest(tube, limits, start, start.s + 600.0, dt=MACHINE.dt))
+    prof = res.profile
+    s, v, a, _ = prof.at(np.array([0.0]))[:, 0]
+    assert (s, v, a) == pytest.approx((start.s, v0, a0), rel=1e-9, abs=1e-9)
+    v = prof.at(np.linspace(0.0, prof.duration, 200001))[1]
+    assert v.min() >= -1e-9 * (1.0 + v0)
+    rep = played(tube, prof, limits, MACHINE.dt)
+    assert rep.violations == 0, rep.first
+
+
+def test_release_ends_at_rest_acceleration_within_the_jerk_limits(tube):
+    """The release is a constant path jerk j from (v0, a0) to a = 0, v1 = v0 - a0^2/(2j),
+    ending before one grid step, its axis jerk within the limits; an accelerating start, or
+    a release longer than the grid step, gets none."""
+    from lookahead.planning.lp.release import start_release
+
+    limits = MACHINE.limits.scaled(0.98)
+    start = PathState(900.0, 3.1, -265.4)
+    h = default_grid_step(tube, limits)
+    rel = start_release(tube, limits, start, h, 1000.0, MACHINE.dt)
+    assert rel is not None
+    dur = rel.profile.duration
+    assert dur == pytest.approx(265.4 / rel.jerk)
+    s1, v1, a1, j = rel.profile.at(np.array([dur]))[:, 0]
+    assert (s1, v1, a1) == pytest.approx((rel.end.s, rel.end.v, 0.0), abs=1e-9)
+    assert v1 == pytest.approx(3.1 - 265.4**2 / (2.0 * rel.jerk))
+    assert 0.0 < v1 < 3.1 and start.s < s1 < start.s + h and j == pytest.approx(rel.jerk)
+    t = np.linspace(0.0, dur, 2001)
+    s, v, a, jj = rel.profile.at(t)
+    d = tube.eval_s(s, 3)
+    axis_jerk = d[3] * v[:, None] ** 3 + 3.0 * d[2] * (v * a)[:, None] + d[1] * jj[:, None]
+    assert np.max(np.abs(axis_jerk) / limits.jmax) <= 1.0
+    assert start_release(tube, limits, PathState(900.0, 3.1, 265.4), h, 1000.0,
+                         MACHINE.dt) is None
+    assert start_release(tube, limits, start, 1e-3 * (s1 - start.s), 1000.0,
+                         MACHINE.dt) is None
+    # degenerate starts (found by test_random_moving_starts_never_raise): a feed below
+    # REST is rest, an acceleration too small to move s is no release
+    for v0, a0 in ((1.5e-171, -8e-194), (500.0, -8e-194)):
+        assert start_release(tube, limits, PathState(900.0, v0, a0), h, 1000.0,
+                             MACHINE.dt) is None

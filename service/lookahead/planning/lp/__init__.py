@@ -7,6 +7,7 @@ Modules, each importing only the ones above it:
   acceleration, linearized jerk, jerk change, end slopes) and the per-node `Tightening`.
 - `profile`: grid values -> C2 quintic feed profile s(t); grid travel time.
 - `envelope`: jerk-limited start/stop S-curve bounds on q, braking distances.
+- `release`: a braking start at low feed released in closed form before the LP.
 - `solve`: the scaled LP and its backends (HiGHS, OSQP).
 - `seam`: where a replan continues the last plan.
 - `planner`: `LPPlanner` (grid, LP passes, relaxation, check/repair loop).

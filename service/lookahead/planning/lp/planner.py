@@ -24,7 +24,9 @@ state (`_brake_room`: from v_cap with a = 0 no bounded jerk reaches 0.995 v_cap 
 node, the cascade of issue 13), a braking start's envelope releases at least as fast as
 a0^2 / v0 (else it forced a stall), the first node has an exact jerk row
 (`rows.start_jerk_rows`), and a start above the limits (an override) is judged against
-its own excess while a braking could not yet have removed it (`_start_allowance`). If the
+its own excess while a braking could not yet have removed it (`_start_allowance`); a
+braking start whose acceleration would reach 0 within one grid step (the braking into a
+plan's end at low feed) is first released in closed form (`lp.release`). If the
 LP is still infeasible, it is relaxed in this order: (1) the start zone (two braking
 distances, `_start_zone`) gets the limits themselves (factors 1); (2) its rows become
 elastic (`lp.elastic`: slacks at a dominating cost, feasible whatever the start, exact
@@ -71,6 +73,7 @@ from lookahead.planning.lp.profile import (
     node_accelerations,
     profile_from_grid,
 )
+from lookahead.planning.lp.release import start_release
 from lookahead.planning.lp.rows import (
     GridGeometry,
     Rows,
@@ -95,7 +98,7 @@ from lookahead.planning.lp.seam import (
 )
 from lookahead.planning.lp.solve import ScaledLP, make_backend
 from lookahead.planning.place import PlacedPlanningError
-from lookahead.planning.profile_ops import slice_profile
+from lookahead.planning.profile_ops import concatenate, slice_profile
 from lookahead.planning.sampled_check import SampledRatios, analytic_ratios
 
 
@@ -342,8 +345,33 @@ class LPPlanner:
                 except PlanningError:
                     self._last = last
         if result is None:
-            result = self._plan_cold(request, fixed_head)
+            result = self._plan_released(request, fixed_head)
         return PlanResult(result.profile, self.name, time.perf_counter() - t0, result.info)
+
+    def _plan_released(self, request: PlanRequest, fixed_head: np.ndarray | None
+                       ) -> PlanResult:
+        """`_plan_cold`, after the closed-form release of a braking start that ends within
+        one grid step (`lp.release`: the grid cannot follow it, its first quintic reversed);
+        without it if there is none or the plan after it fails."""
+        h = self.grid_step or default_grid_step(request.path, request.limits)
+        release = None if fixed_head is not None else start_release(
+            request.path, request.limits, request.start, h, float(request.s_end), request.dt,
+            self.corners(request.path, h))
+        if release is not None:
+            try:
+                sub = self._plan_cold(replace(request, start=release.end), None)
+            except PlanningError:
+                pass
+            else:
+                info = dict(sub.info)
+                info["release"] = {"jerk": release.jerk, "s": release.end.s,
+                                   "v": release.end.v}
+                if "grid_s" in info:
+                    info["grid_s"] = np.concatenate([[request.start.s], info["grid_s"]])
+                    info["grid_q"] = np.concatenate([[request.start.v**2], info["grid_q"]])
+                return PlanResult(concatenate([release.profile, sub.profile]), self.name,
+                                  0.0, info)
+        return self._plan_cold(request, fixed_head)
 
     def _plan_cold(self, request: PlanRequest, fixed_head: np.ndarray | None) -> PlanResult:
         """A plan from scratch; if it fails, once more with the jerk margin times
