@@ -400,10 +400,7 @@ class LPPlanner:
             first_error = exc
         finally:
             self._stuck_rule = False
-        try:
-            return self._plan_after(request, fixed_head, first_error, length, h)
-        finally:
-            self._stuck_rule = True
+        return self._plan_after(request, fixed_head, first_error, length, h)
 
     def _plan_after(self, request: PlanRequest, fixed_head: np.ndarray | None,
                     first_error: PlanningError, length: float, h: float) -> PlanResult:
