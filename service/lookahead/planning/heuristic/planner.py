@@ -97,6 +97,16 @@ class _RoundsExhaustedError(PlanningError):
     """A layout's profile still failed verification after its last repair round."""
 
 
+class _FirstPassFailedError(PlanningError):
+    """No layout verified in `_plan_phases`'s first pass, which was asked to stop there;
+    `exhausted`: the layouts (indices, in order) that ran out of rounds, which the second
+    pass would replan with all of them."""
+
+    def __init__(self, problem: str, exhausted: list[int]) -> None:
+        super().__init__(problem)
+        self.exhausted = exhausted
+
+
 @dataclass(frozen=True)
 class Layout:
     """One way to cut the path into planning segments: the band ratio of the feed limit
@@ -225,21 +235,42 @@ class HeuristicPlanner:
         grid, vlim = self._grid(request, start, limits)
         first_problem = ""
         if not request.start.v > vlim[0] / self.margin:
+            # from a moving start that may brake, the rescue (finer bands, first-pass
+            # rounds) runs before the layouts' full repair rounds: on the fast corpus's
+            # 700 replan-continuity states the full rounds planned none (2 tried, 2 s
+            # each), the rescue planned one of them in 0.5 s
+            defer = not (start.v == 0 and start.a == 0) and not (
+                not self.brake_within_limits and state_scale(request, grid) <= 1.0)
             try:
-                phases, core = self._plan_phases(request, grid, vlim, limits)
+                phases, core = self._plan_phases(request, grid, vlim, limits,
+                                                 second_pass=not defer)
                 return self._result(build_profile(phases), t_start, core)
             except PlanningError as exc:
-                if start.v == 0 and start.a == 0:
-                    raise
-                if not self.brake_within_limits and state_scale(request, grid) <= 1.0:
+                if not defer:
                     raise
                 first_problem = str(exc)  # perhaps the start acceleration is too high
                 rescued = self._rescue_plan(request, grid, limits)
                 if rescued is not None:
                     return self._result(build_profile(rescued[0]), t_start, rescued[1])
+                exhausted = exc.exhausted if isinstance(exc, _FirstPassFailedError) else []
+                try:
+                    phases, core = self._second_pass(request, grid, vlim, limits,
+                                                     exhausted, first_problem)
+                    return self._result(build_profile(phases), t_start, core)
+                except PlanningError as exc2:
+                    first_problem = str(exc2)
         # brake to the limits first; if the rest cannot follow from there (the window is
-        # too short for that feed), brake to a lower feed
+        # too short for that feed), brake to a lower feed. First pass: each target's rest
+        # gets the layouts' first-pass rounds only; the full rounds (`_plan_phases`'s
+        # second pass) run, target by target, only where no target planned in the first
+        # pass (the same attempts as planning each target fully in turn, reordered: from
+        # a butterfly replan the full rounds failed on the first two targets, 14 s, while
+        # the third target's rest verified in its first round). A target whose brake
+        # ends in the state of an earlier target's brake is not planned again.
         problem = ""
+        retry: list[tuple[float, float, Phases, PlanRequest, PathGrid, np.ndarray,
+                          list[int]]] = []
+        tried: set[tuple[float, float, float]] = set()
         for fraction in BRAKE_TARGETS:
             try:
                 brake, g = self._brake.brake(request, grid, vlim, limits, fraction)
@@ -249,10 +280,29 @@ class HeuristicPlanner:
             end = phases_end(brake)
             if not end.s < s_end:
                 break
+            if (end.s, end.v, end.a) in tried:
+                continue  # the same rest as a target that failed
+            tried.add((end.s, end.v, end.a))
             rest = replace(request, start=end)
             rest_grid, rest_vlim = self._grid(request, end, limits)
             try:
-                phases, core = self._plan_phases(rest, rest_grid, rest_vlim, limits)
+                phases, core = self._plan_phases(rest, rest_grid, rest_vlim, limits,
+                                                 second_pass=False)
+            except _FirstPassFailedError as exc:
+                problem = str(exc)
+                if exc.exhausted:
+                    retry.append((fraction, g, brake, rest, rest_grid, rest_vlim,
+                                  exc.exhausted))
+                continue
+            except PlanningError as exc:
+                problem = str(exc)
+                continue
+            info = {"brake_scale": g, "brake_target": fraction, **core}
+            return self._result(build_profile(concat_phases([brake, phases])), t_start, info)
+        for fraction, g, brake, rest, rest_grid, rest_vlim, exhausted in retry:
+            try:
+                phases, core = self._second_pass(rest, rest_grid, rest_vlim, limits,
+                                                 exhausted)
             except PlanningError as exc:
                 problem = str(exc)
                 continue
@@ -280,15 +330,15 @@ class HeuristicPlanner:
         return grid, feed_limit(grid, limits, self.shares, request.feed_cap)
 
     def _plan_phases(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
-                     limits: AxisLimits) -> tuple[Phases, dict]:
-        """The fastest verified profile over the layouts (PlanningError if none is)."""
-        best, problem = None, ""
-        # the layout that won last first (a replan continues its plan); first pass: each
-        # layout FIRST_PASS_ROUNDS repair rounds, once one has a verified profile the
-        # others only OTHER_LAYOUT_ROUNDS; second pass (none verified): the layouts that
-        # ran out of rounds get all of them, in the same order
+                     limits: AxisLimits, second_pass: bool = True) -> tuple[Phases, dict]:
+        """The fastest verified profile over the layouts (PlanningError if none is).
+        First pass: the layout that won last first (a replan continues its plan), each
+        layout FIRST_PASS_ROUNDS repair rounds, once one has a verified profile the others
+        only OTHER_LAYOUT_ROUNDS; second pass (none verified; `second_pass` False: raise
+        `_FirstPassFailedError` naming them instead): the layouts that ran out of rounds
+        get all of them, in the same order (`_second_pass`)."""
         order = sorted(range(len(self.layouts)), key=lambda i: i != self._last_layout)
-        exhausted = []
+        best, problem, exhausted = None, "", []
         for i in order:
             rounds = min(self.repair_rounds,
                          FIRST_PASS_ROUNDS if best is None else OTHER_LAYOUT_ROUNDS)
@@ -303,7 +353,19 @@ class HeuristicPlanner:
             duration = float(np.sum(phases.duration))
             if best is None or duration < best[2]:
                 best = (phases, {**info, "layout": i}, duration)
-        for i in exhausted if best is None else ():
+        if best is None:
+            if not second_pass:
+                raise _FirstPassFailedError(problem, exhausted)
+            return self._second_pass(request, grid, vlim, limits, exhausted, problem)
+        self._last_layout = best[1]["layout"]
+        return best[0], best[1]
+
+    def _second_pass(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
+                     limits: AxisLimits, exhausted: list[int], problem: str = ""
+                     ) -> tuple[Phases, dict]:
+        """The first of the `exhausted` layouts (indices, in order) that verifies with
+        all repair rounds (PlanningError if none does)."""
+        for i in exhausted:
             try:
                 phases, info = self._layout_plan(request, grid, vlim, limits, i,
                                                  self.repair_rounds, True)
@@ -311,12 +373,9 @@ class HeuristicPlanner:
                 problem = str(exc)
                 continue
             # the layouts after it already failed more rounds than they would now get
-            best = (phases, {**info, "layout": i}, float(np.sum(phases.duration)))
-            break
-        if best is None:
-            raise PlanningError(problem)
-        self._last_layout = best[1]["layout"]
-        return best[0], best[1]
+            self._last_layout = i
+            return phases, {**info, "layout": i}
+        raise PlanningError(problem)
 
     def _start_limit(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
                      limits: AxisLimits) -> float:

@@ -44,11 +44,16 @@ def junction_feeds(request: PlanRequest, grid: PathGrid, starts: np.ndarray,
                    b: SegmentBudgets, slack: float = _SLACK) -> np.ndarray:
     """Upper bounds of the junction feeds (nseg + 1,), junction 0 being the start; each
     feed change is planned into `slack` times the segment length."""
-    w = junction_caps(request, grid, starts, b)
-    # Scalar loops: each junction depends on its neighbour's result.
+    w = backward_pass(junction_caps(request, grid, starts, b), b, slack)
+    forward_pass(w, b, slack)
+    return w
+
+
+def backward_pass(w: np.ndarray, b: SegmentBudgets, slack: float = _SLACK) -> np.ndarray:
+    """Lower junction feeds 1.. in place (and return w) to what each later segment can
+    slow down from to its end's feed (a scalar loop: each junction depends on the next)."""
     for k in range(b.L.size - 1, 0, -1):
         w[k] = min(w[k], reachable_feed(w[k + 1], b.L[k] * slack, b.A[k], b.J[k]))
-    forward_pass(w, b, slack)
     return w
 
 
@@ -127,9 +132,13 @@ def zero_junction_parts(solver: SCurveSolver, request: PlanRequest, grid: PathGr
                         ) -> list[Phases]:
     """The phases per segment (raises SegmentInfeasibleError if the start state cannot
     reach a valid end state within the first segment)."""
-    w_hi = junction_feeds(request, grid, starts, b)
-    first, w1 = first_segment(solver, request, b, w_hi[1], margin)
-    w = w_hi.copy()
+    # the first segment needs only junction 1, which the forward pass does not change:
+    # it runs once the first segment is found (the leading-segment merges of
+    # `HeuristicPlanner._profile_phases` call this per merge; from braking butterfly
+    # replans ~45 times a round, where the forward pass was a third of the replan)
+    w = backward_pass(junction_caps(request, grid, starts, b), b)
+    first, w1 = first_segment(solver, request, b, float(w[1]), margin)
+    forward_pass(w, b)
     if w1 < w[1]:
         w[1] = w1
         forward_pass(w, b)
