@@ -69,6 +69,7 @@ def test_highs_starts_from_the_basis_of_a_problem_of_the_same_shape():
     A's basis (a warm solve) and meets the cold solve's objective."""
     pytest.importorskip("highspy", reason="highspy is in the bench extra only")
     warm = HighsBackend()
+    warm.MEMORY = 4  # off by default (HighsBackend.MEMORY)
     assert warm.solve(feed_lp(60, 1)).ok
     assert warm.solve(feed_lp(67, 2)).ok
     assert warm.warm_solves == 0

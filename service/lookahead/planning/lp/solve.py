@@ -554,13 +554,18 @@ class HighsBackend:
     A problem of the shape of one solved before the last (a jerk pass after the
     velocity+acceleration pass of the same grid: the retry of a grid with another jerk
     margin, the planner's fallbacks) starts from that problem's last optimal basis,
-    remembered per shape (`MEMORY` shapes; measured on the 44 LPs of n-butterfly's whole
-    job: 15700 -> 12800 simplex iterations). (The velocity+acceleration pass's basis
-    with the jerk rows' slacks basic, for the first jerk pass, saved ~10 % of the
-    iterations and changed two objectives by > 1e-6: not used.)"""
+    remembered per shape (`MEMORY` shapes, off by default: see there; measured on the 44
+    LPs of n-butterfly's whole job: 15700 -> 12800 simplex iterations). (The
+    velocity+acceleration pass's basis with the jerk rows' slacks basic, for the first
+    jerk pass, saved ~10 % of the iterations and changed two objectives by > 1e-6: not
+    used.)"""
 
-    #: shapes (columns, rows) whose last optimal basis is kept for a later start
-    MEMORY = 4
+    #: shapes (columns, rows) whose last optimal basis is kept for a later start; off (0):
+    #: measured at the stop of this round, it made plans depend on what the backend solved
+    #: before (a degenerate optimum reached from another basis): the replan-continuity
+    #: bench's LP replans on n-butterfly refused 4 of 50 with it (p99 2.35 s), 0 of 50
+    #: without (p99 47 ms), with fast-corpus winding times identical either way
+    MEMORY = 0
     #: HiGHS's dual simplex edge weights: 1 = Devex. Its default (steepest edge) computes
     #: exact weights from every new start basis, one BTRAN per row (~8000 rows on the
     #: butterfly's jerk LPs), which cost more than the iterations of a warm re-solve
