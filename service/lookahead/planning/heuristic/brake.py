@@ -36,6 +36,11 @@ BRAKE_TARGETS = (1.0, 0.7, 0.5, 0.3, 0.15, 0.05)
 BRAKE_SHRINK = (1.0, 0.85, 0.7, 0.5)
 
 
+class BrakeRefusedError(PlanningError):
+    """`Brake.brake` found no brake from the start state within the limits (the state
+    itself cannot be brought within them, or every brake tried fails its check)."""
+
+
 def time_scaled(limits: AxisLimits, g: float) -> AxisLimits:
     """Limits (v g, a g^2, j g^3): what the same motion needs when run g times faster."""
     return AxisLimits(limits.vmax * g, limits.amax * g * g, limits.jmax * g**3)
@@ -83,7 +88,7 @@ class Brake:
                 break
             lo = g
         if hi is None:
-            raise PlanningError(f"the start state (v={st.v:.6g}, a={st.a:.6g}) cannot be "
+            raise BrakeRefusedError(f"the start state (v={st.v:.6g}, a={st.a:.6g}) cannot be "
                                 "brought within the limits")
         if lo is not None:
             for _ in range(12):  # the start fits from some g on: bisect for it
@@ -100,7 +105,7 @@ class Brake:
             phases, ncell = found
             if not self._brake_fails(phases, grid, ncell, check):
                 return phases, hi
-        raise PlanningError(f"no brake within the limits from v={st.v:.6g}, a={st.a:.6g}")
+        raise BrakeRefusedError(f"no brake within the limits from v={st.v:.6g}, a={st.a:.6g}")
 
     def _brake_at(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
                   limits: AxisLimits, g: float, shrink: float,

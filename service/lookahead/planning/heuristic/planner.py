@@ -32,6 +32,7 @@ from lookahead.planning.base import FeedProfile, PathState, PlanningError, PlanR
 from lookahead.planning.heuristic.brake import (
     BRAKE_TARGETS,
     Brake,
+    BrakeRefusedError,
     first_cells,
     phases_end,
     state_scale,
@@ -268,6 +269,7 @@ class HeuristicPlanner:
         # the third target's rest verified in its first round). A target whose brake
         # ends in the state of an earlier target's brake is not planned again.
         problem = ""
+        refused = False  # `problem` is the brake's own refusal (BrakeRefusedError)
         retry: list[tuple[float, float, Phases, PlanRequest, PathGrid, np.ndarray,
                           list[int]]] = []
         tried: set[tuple[float, float, float]] = set()
@@ -275,7 +277,7 @@ class HeuristicPlanner:
             try:
                 brake, g = self._brake.brake(request, grid, vlim, limits, fraction)
             except PlanningError as exc:
-                problem = str(exc)
+                problem, refused = str(exc), isinstance(exc, BrakeRefusedError)
                 break
             end = phases_end(brake)
             if not end.s < s_end:
@@ -289,13 +291,13 @@ class HeuristicPlanner:
                 phases, core = self._plan_phases(rest, rest_grid, rest_vlim, limits,
                                                  second_pass=False)
             except _FirstPassFailedError as exc:
-                problem = str(exc)
+                problem, refused = str(exc), False
                 if exc.exhausted:
                     retry.append((fraction, g, brake, rest, rest_grid, rest_vlim,
                                   exc.exhausted))
                 continue
             except PlanningError as exc:
-                problem = str(exc)
+                problem, refused = str(exc), False
                 continue
             info = {"brake_scale": g, "brake_target": fraction, **core}
             return self._result(build_profile(concat_phases([brake, phases])), t_start, info)
@@ -304,7 +306,7 @@ class HeuristicPlanner:
                 phases, core = self._second_pass(rest, rest_grid, rest_vlim, limits,
                                                  exhausted)
             except PlanningError as exc:
-                problem = str(exc)
+                problem, refused = str(exc), False
                 continue
             info = {"brake_scale": g, "brake_target": fraction, **core}
             return self._result(build_profile(concat_phases([brake, phases])), t_start, info)
@@ -316,8 +318,7 @@ class HeuristicPlanner:
                 return self._result(build_profile(phases), t_start, core)
             except PlanningError as exc:
                 problem = f"{problem} {exc}"
-        if problem.startswith("no brake within the limits") or \
-                problem.startswith("the start state (v="):
+        if refused:  # the brake's own reason says it all
             raise PlanningError(problem)
         raise PlanningError("the start state cannot slow down to the limits within the "
                             f"window [{start.s}, {s_end}]: {first_problem} {problem}")
