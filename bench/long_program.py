@@ -4,7 +4,7 @@ x real time of `lookahead plan`, and the whole chain `publish -> serve --fast ->
 bench/results/long_program.json.
 
     .venv/bin/python bench/long_program.py [--lines 100000] [--methods heuristic,lp]
-        [--no-stream]
+        [--no-stream] [--out FILE]
 """
 
 from __future__ import annotations
@@ -118,6 +118,7 @@ def main() -> int:
     ap.add_argument("--lines", type=int, default=100_000)
     ap.add_argument("--methods", default="heuristic,lp")
     ap.add_argument("--no-stream", action="store_true")
+    ap.add_argument("--out", default=str(OUT), help="results file (default: %(default)s)")
     args = ap.parse_args()
     prog = program(args.lines)
     text = gcode(prog)
@@ -132,7 +133,7 @@ def main() -> int:
         if not args.no_stream:
             result["stream"].append(stream(job, method))
             print(json.dumps(result["stream"][-1])[:600], file=sys.stderr)
-    OUT.write_text(json.dumps(result, indent=1))
+    Path(args.out).write_text(json.dumps(result, indent=1))
     return 0
 
 

@@ -249,7 +249,9 @@ def _hermite_fraction(ds: np.ndarray, span: np.ndarray, width: np.ndarray,
     """(u - leaf start) / leaf width at arc length ds into each leaf: the cubic Hermite
     u(s) through both leaf ends with slopes du/ds = 1/sigma there (the initial guess of
     the inversion). Slopes are capped at 3 times the leaf's mean du/ds (the Fritsch-
-    Carlson bound: the cubic stays monotone), so sigma ~ 0 at an edge (cusp) is harmless."""
+    Carlson bound: the cubic stays monotone), so sigma ~ 0 at an edge (cusp) is harmless.
+    Hand-written: scipy's CubicHermiteSpline builds one spline over all its x, while this
+    evaluates a different cubic per sample (its own leaf) in a few vector operations."""
     t = np.clip(ds / np.maximum(span, _TINY), 0.0, 1.0)
     mean = span / np.maximum(width, _TINY)  # mean sigma over the leaf
     m0 = np.minimum(mean / np.maximum(sig_lo, _TINY), 3.0)

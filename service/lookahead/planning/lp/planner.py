@@ -62,6 +62,7 @@ from lookahead.planning.lp.envelope import (
 from lookahead.planning.lp.grid import (
     build_grid,
     extend_grid,
+    feature_samples,
     feature_steps,
     near_reversals,
     refine_grid,
@@ -688,13 +689,12 @@ class LPPlanner:
     def refine(self, path: Path, s: np.ndarray, stop_idx: np.ndarray, h: float,
                first: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Finer nodes where the path bends sharply (`lp.grid.refine_grid`), from node
-        `first` on, judged on samples FEATURE_SAMPLES per nominal step h apart."""
+        `first` on, judged on samples FEATURE_SAMPLES per nominal step h apart, and finer
+        where a bend hides between two of them (`lp.grid.feature_samples`)."""
         lo, hi = float(s[first]), float(s[-1])
         if not hi > lo:
             return s, stop_idx
-        n = int(np.ceil((hi - lo) / h * FEATURE_SAMPLES)) + 1
-        s_feat = np.linspace(lo, hi, n)
-        d = path.eval_s(s_feat, 3)
+        s_feat, d = feature_samples(path, lo, hi, h / FEATURE_SAMPLES, s[stop_idx])
         step = feature_steps(s_feat, d[2], d[3], np.asarray(path.path_scale, dtype=float), h)
         return refine_grid(s, stop_idx, s_feat, step, first)
 
