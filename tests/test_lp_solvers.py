@@ -254,7 +254,8 @@ def _window_lps(name: str) -> list:
             seen.append((lp, out))
             return out
 
-    planner = LPPlanner(solver="highs-milp")
+    # the LPs an OSQP planner builds (its grid and jerk-change rows, `LPPlanner`)
+    planner = LPPlanner(solver="highs-milp", limit_curve_grid=False, axis_jerk_change=True)
     planner.backend = Recording()
     planner.plan(request)
     return seen
@@ -313,7 +314,8 @@ def test_osqp_rescue_solves_the_butterfly_first_jerk_pass():
                 raise _EnoughError
             return out
 
-    planner = LPPlanner(solver="highs-milp")
+    planner = LPPlanner(solver="highs-milp", limit_curve_grid=False,
+                        axis_jerk_change=True)  # the LPs an OSQP planner builds
     planner.backend = Recording()
     with pytest.raises(_EnoughError):
         planner.plan(request)

@@ -14,7 +14,7 @@ evaluated at three budget points (just inside both ends and the middle) and two 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -73,6 +73,8 @@ class PathGrid:
     c1_cap: np.ndarray
     corner_after: np.ndarray
     lead_cells: int = 0
+    #: arrays the feed limit and budget passes reuse (`feed_limit`, `_budget_terms`)
+    _terms: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def ncells(self) -> int:
@@ -382,8 +384,13 @@ def feed_limit(grid: PathGrid, limits: AxisLimits, shares: BudgetShares,
     velocity, centripetal and geometric-jerk limits, the C1-knot cap and the feed cap."""
     nb = BUDGET_FRACTIONS.size
     # each bound falls with its |derivative|: take the largest over the budget points
-    # first, then one division / root per cell and axis
-    xs, xss, xsss = (_abs_max_over_points(x, nb) for x in (grid.xs, grid.xss, grid.xsss))
+    # first, then one division / root per cell and axis (the same for every layout's
+    # shares: cached on the grid)
+    peaks = grid._terms.get("peaks")
+    if peaks is None:
+        peaks = tuple(_abs_max_over_points(x, nb) for x in (grid.xs, grid.xss, grid.xsss))
+        grid._terms["peaks"] = peaks
+    xs, xss, xsss = peaks
     jmax = limits.jmax * grid.jerk_scale[:, None]
     with np.errstate(divide="ignore"):
         v_vel = shares.velocity * limits.vmax / xs
@@ -431,6 +438,44 @@ class SegmentBudgets:
     J: np.ndarray
 
 
+@dataclass(frozen=True)
+class _BudgetTerms:
+    """What `segment_budgets` and `level_accelerations` compute the same way on every
+    call for one grid and one (limits, shares): the budget points flattened to columns
+    (ncell, nb * naxes) of |x_s|, |x_ss|, |x_sss| and 3 |x_ss|, where |x_s| > 0 and
+    |x_ss| > 0, amax and jmax tiled to the columns (with the jerk scale and the headroom)
+    and the coupling share of jmax. Cached on the grid (a planner's layouts and rounds
+    call the budgets 7 times a round); the same float operations as computing them in
+    place."""
+
+    xs: np.ndarray
+    xss: np.ndarray
+    xsss: np.ndarray
+    xss3: np.ndarray
+    xs_pos: np.ndarray
+    xss_pos: np.ndarray
+    amax: np.ndarray
+    jmax: np.ndarray
+    coupling_jmax: np.ndarray
+
+
+def _budget_terms(grid: PathGrid, limits: AxisLimits, shares: BudgetShares) -> _BudgetTerms:
+    key = (limits.amax.tobytes(), limits.jmax.tobytes(), shares.headroom,
+           shares.jerk_coupling)
+    terms = grid._terms.get(key)
+    if terms is None:
+        nb = BUDGET_FRACTIONS.size
+        ncell = grid.ncells
+        xs, xss, xsss = (np.abs(x[:, :nb, :]).reshape(ncell, -1)
+                         for x in (grid.xs, grid.xss, grid.xsss))
+        jmax = np.tile(limits.jmax, nb) * grid.jerk_scale[:, None] * shares.headroom
+        terms = _BudgetTerms(xs, xss, xsss, 3.0 * xss, xs > 0, xss > 0,
+                             np.tile(limits.amax, nb) * shares.headroom, jmax,
+                             shares.jerk_coupling * jmax)
+        grid._terms[key] = terms
+    return terms
+
+
 def segment_budgets(grid: PathGrid, starts: np.ndarray, vlim: np.ndarray,
                     limits: AxisLimits, shares: BudgetShares,
                     factor: np.ndarray | None = None,
@@ -448,22 +493,18 @@ def segment_budgets(grid: PathGrid, starts: np.ndarray, vlim: np.ndarray,
     if v_cap is not None:
         V = np.minimum(V, v_cap)
     V = V * factor
-    nb = BUDGET_FRACTIONS.size
-    ncell = grid.ncells
     # budget points flattened to columns (ncell, nb * naxes); limits tiled to match
-    xs, xss, xsss = (np.abs(x[:, :nb, :]).reshape(ncell, -1)
-                     for x in (grid.xs, grid.xss, grid.xsss))
-    amax = np.tile(limits.amax, nb) * shares.headroom
+    t = _budget_terms(grid, limits, shares)
+    xs, xss, xsss = t.xs, t.xss, t.xsss
     Vc = V[seg_of_cell][:, None]
-    jmax = np.tile(limits.jmax, nb) * grid.jerk_scale[:, None] * shares.headroom
+    coupling = t.xss3 * Vc  # 3 |x_ss| V
     with np.errstate(divide="ignore", invalid="ignore"):
-        a_cell = np.where(xs > 0, (amax - xss * Vc**2) / xs, np.inf)
-        a_cell = np.minimum(a_cell, np.where(xss > 0, shares.jerk_coupling * jmax
-                                             / (3.0 * xss * Vc), np.inf))
+        a_cell = np.where(t.xs_pos, (t.amax - xss * Vc**2) / xs, np.inf)
+        a_cell = np.minimum(a_cell, np.where(t.xss_pos, t.coupling_jmax / coupling, np.inf))
     A = np.minimum.reduceat(_min_over_columns(a_cell), starts[:-1])
     Ac = A[seg_of_cell][:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
-        j_cell = np.where(xs > 0, (jmax - xsss * Vc**3 - 3.0 * xss * Vc * Ac) / xs, np.inf)
+        j_cell = np.where(t.xs_pos, (t.jmax - xsss * Vc**3 - coupling * Ac) / xs, np.inf)
     J = np.minimum.reduceat(_min_over_columns(j_cell), starts[:-1])
     s0 = grid.edges[starts[:-1]]
     L = grid.edges[starts[1:]] - s0
@@ -481,17 +522,13 @@ def level_accelerations(grid: PathGrid, starts: np.ndarray, V: np.ndarray, J: np
     acceleration shrink, so a feed level keeps its segment's J with a larger A."""
     nseg = starts.size - 1
     seg_of_cell = np.repeat(np.arange(nseg), np.diff(starts))
-    nb = BUDGET_FRACTIONS.size
-    ncell = grid.ncells
-    xs, xss, xsss = (np.abs(x[:, :nb, :]).reshape(ncell, -1)
-                     for x in (grid.xs, grid.xss, grid.xsss))
-    amax = np.tile(limits.amax, nb) * shares.headroom
-    jmax = np.tile(limits.jmax, nb) * grid.jerk_scale[:, None] * shares.headroom
+    t = _budget_terms(grid, limits, shares)
+    xs, xss, xsss = t.xs, t.xss, t.xsss
     Vc = V[seg_of_cell][:, None]
     Jc = J[seg_of_cell][:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
-        a_cell = np.where(xs > 0, (amax - xss * Vc**2) / xs, np.inf)
-        a_cell = np.minimum(a_cell, np.where(xss > 0, (jmax - xsss * Vc**3 - xs * Jc)
-                                             / (3.0 * xss * Vc), np.inf))
+        a_cell = np.where(t.xs_pos, (t.amax - xss * Vc**2) / xs, np.inf)
+        a_cell = np.minimum(a_cell, np.where(t.xss_pos, (t.jmax - xsss * Vc**3 - xs * Jc)
+                                             / (t.xss3 * Vc), np.inf))
     return np.minimum.reduceat(_min_over_columns(a_cell), starts[:-1])
 

@@ -98,6 +98,11 @@ class _RoundsExhaustedError(PlanningError):
     """A layout's profile still failed verification after its last repair round."""
 
 
+class _CannotWinError(PlanningError):
+    """A layout's last round planned a profile no faster than the best verified one of
+    another layout: verified or not, it would not be chosen (so it is not verified)."""
+
+
 class _FirstPassFailedError(PlanningError):
     """No layout verified in `_plan_phases`'s first pass, which was asked to stop there;
     `exhausted`: the layouts (indices, in order) that ran out of rounds, which the second
@@ -345,7 +350,10 @@ class HeuristicPlanner:
                          FIRST_PASS_ROUNDS if best is None else OTHER_LAYOUT_ROUNDS)
             try:
                 phases, info = self._layout_plan(request, grid, vlim, limits, i, rounds,
-                                                 best is None or MERGE_IN_OTHER_LAYOUTS)
+                                                 best is None or MERGE_IN_OTHER_LAYOUTS,
+                                                 None if best is None else best[2])
+            except _CannotWinError:
+                continue
             except PlanningError as exc:
                 problem = str(exc)
                 if isinstance(exc, _RoundsExhaustedError) and rounds < self.repair_rounds:
@@ -407,7 +415,8 @@ class HeuristicPlanner:
             lim = feed_limit(grid, limits, fine.shares, request.feed_cap)
             try:
                 phases, info = self._plan_layout(request, grid, lim, limits, fine,
-                                                 FIRST_PASS_ROUNDS)
+                                                 FIRST_PASS_ROUNDS,
+                                                 beat=None if best is None else best[2])
             except PlanningError:
                 continue
             duration = float(np.sum(phases.duration))
@@ -416,19 +425,22 @@ class HeuristicPlanner:
         return None if best is None else best[:2]
 
     def _layout_plan(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
-                     limits: AxisLimits, i: int, rounds: int, merge: bool
-                     ) -> tuple[Phases, dict]:
+                     limits: AxisLimits, i: int, rounds: int, merge: bool,
+                     beat: float | None = None) -> tuple[Phases, dict]:
         """`_plan_layout` for layout i, on the feed limit of its shares."""
         layout = self.layouts[i]
         lim = vlim if layout.shares == self.shares else feed_limit(
             grid, limits, layout.shares, request.feed_cap)
-        return self._plan_layout(request, grid, lim, limits, layout, rounds, merge)
+        return self._plan_layout(request, grid, lim, limits, layout, rounds, merge, beat)
 
     def _plan_layout(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
                      limits: AxisLimits, layout: Layout, rounds: int,
-                     merge: bool = True) -> tuple[Phases, dict]:
+                     merge: bool = True, beat: float | None = None) -> tuple[Phases, dict]:
         """Segments, S-curves, verification and repair from a start within the limits
-        (`merge`: see `_profile_phases`)."""
+        (`merge`: see `_profile_phases`). `beat` (s): the duration of the best verified
+        profile so far; a last round's profile that does not beat it raises
+        `_CannotWinError` unverified (verification costs as much as a plan on short
+        windows, and the caller keeps only a faster profile)."""
         shares = layout.shares
         starts = choose_segments(grid, vlim, layout.band_ratio)
         if layout.split is not None:
@@ -445,6 +457,9 @@ class HeuristicPlanner:
                 request, grid, starts, factor, vlim, limits, shares, layout.zero_fallback,
                 layout.free_junctions, layout.levels, merge)
             info["zero_junction_rounds"] += int(not free)
+            if beat is not None and round_ == rounds - 1 and \
+                    not float(np.sum(phases.duration)) < beat:
+                raise _CannotWinError("heuristic: layout no faster than the best one")
             profile = build_profile(phases)
             failing = failing_segments(profile, grid, starts, request.limits,
                                        request.path, request.dt)

@@ -75,6 +75,13 @@ class Phases:
     pos: np.ndarray
 
 
+def phases_of_lists(h: list, jk: list, ac: list, ve: list, po: list) -> Phases:
+    """`Phases` of five equal-length lists (duration, jerk, acc, vel, pos), as rows of one
+    array (one numpy call instead of five: the scans build thousands of short motions)."""
+    arr = np.array([h, jk, ac, ve, po], dtype=float).reshape(5, len(h))
+    return Phases(arr[0], arr[1], arr[2], arr[3], arr[4])
+
+
 class SegmentInfeasibleError(RuntimeError):
     """Ruckig found no forward-only motion for a segment."""
 
@@ -87,6 +94,10 @@ class SCurveSolver:
         self._inp = InputParameter(1)
         self._traj = Trajectory(1)
         self._inp.min_velocity = [0.0]  # never reverse along the path
+        # `segment`'s inputs that are the same in every call (scaled to the segment)
+        self._inp.current_position = [0.0]
+        self._inp.target_position = [1.0]
+        self._inp.max_velocity = [1.0]
 
     def segment(self, s0: float, L: float, v0: float, a0: float, v1: float,
                 V: float, A: float, J: float, a1: float = 0.0) -> Phases:
@@ -98,14 +109,11 @@ class SCurveSolver:
         if not (L > 0 and V > 0 and A > 0 and J > 0):
             raise SegmentInfeasibleError(f"bad segment L={L} V={V} A={A} J={J}")
         T = L / V
-        inp = self._inp
-        inp.current_position = [0.0]
+        inp = self._inp  # position 0 -> 1 under velocity 1: set in __init__
         inp.current_velocity = [v0 * T / L]
         inp.current_acceleration = [a0 * T * T / L]
-        inp.target_position = [1.0]
         inp.target_velocity = [v1 * T / L]
         inp.target_acceleration = [a1 * T * T / L]
-        inp.max_velocity = [1.0]
         inp.max_acceleration = [A * T * T / L]
         inp.max_jerk = [J * T**3 / L]
         try:
@@ -142,9 +150,40 @@ class SCurveSolver:
         return self._phases(s0, L, T, max(v0, v1))
 
     def _phases(self, s0: float, L: float, T: float, V: float) -> Phases:
-        """The last trajectory's phases (brake first), scaled back to path units."""
+        """The last trajectory's phases (brake first), scaled back to path units.
+
+        Scalar Python over the <= 9 phases (numpy's per-call overhead on them made this
+        90 % of a Ruckig segment's cost in the planner's scans); the same float
+        operations as `_phases_reference`, the numpy form it replaced."""
         prof = self._traj.profiles[0][0]
         # a, v, p have one entry more than t, j (the end state): drop it
+        t, j, a, v, p = prof.t, prof.j, prof.a, prof.v, prof.p
+        rows = [(t[i], j[i], a[i], v[i], p[i]) for i in range(7) if t[i] > 0]
+        brake = prof.brake
+        if brake.duration > 0:
+            bt, bj, ba, bv, bp = brake.t, brake.j, brake.a, brake.v, brake.p
+            rows = [(bt[i], bj[i], ba[i], bv[i], bp[i]) for i in range(2) if bt[i] > 0] + rows
+        scale_v = L / T
+        scale_a = L / T**2
+        scale_j = L / T**3
+        lowest = math.inf
+        for d, jk, ak, vk, _ in rows:
+            # the lowest feed of each phase: its start, or inside it where the acceleration
+            # passes 0 (Ruckig's velocity interface has no floor on the feed: a brake from
+            # a strong deceleration can dip below 0 within one phase)
+            tau = -ak / jk if jk != 0.0 else -1.0
+            dip = vk - ak * ak / (2.0 * jk) if 0.0 < tau < d else vk
+            lowest = min(lowest, vk * scale_v, dip * scale_v)
+        if rows and lowest < -1e-9 * V:
+            raise SegmentInfeasibleError("motion would reverse")
+        arr = np.array([[r[0] * T for r in rows], [r[1] * scale_j for r in rows],
+                        [r[2] * scale_a for r in rows], [r[3] * scale_v for r in rows],
+                        [s0 + r[4] * L for r in rows]], dtype=float).reshape(5, len(rows))
+        return Phases(duration=arr[0], jerk=arr[1], acc=arr[2], vel=arr[3], pos=arr[4])
+
+    def _phases_reference(self, s0: float, L: float, T: float, V: float) -> Phases:
+        """`_phases` as numpy array operations (the reference its test compares with)."""
+        prof = self._traj.profiles[0][0]
         cols = [prof.t, prof.j, prof.a[:7], prof.v[:7], prof.p[:7]]
         brake = prof.brake
         if brake.duration > 0:
@@ -153,9 +192,6 @@ class SCurveSolver:
         arr = np.array(cols)
         arr = arr[:, arr[0] > 0]
         vel = arr[3] * (L / T)
-        # the lowest feed of each phase: its start, or inside it where the acceleration
-        # passes 0 (Ruckig's velocity interface has no floor on the feed: a brake from a
-        # strong deceleration can dip below 0 within one phase)
         with np.errstate(divide="ignore", invalid="ignore"):
             tau = np.where(arr[1] != 0.0, -arr[2] / arr[1], -1.0)
         inside = (tau > 0.0) & (tau < arr[0])
@@ -200,9 +236,8 @@ def cut_lists(h: list, jk: list, ac: list, ve: list, po: list,
         v1 = v + a * d + j * d * d / 2.0
         if not v1 > 0.0:
             return None
-        return (Phases(np.array([*h, (s_cut - end) / v1]), np.array([*jk, 0.0]),
-                       np.array([*ac, 0.0]), np.array([*ve, v1]), np.array([*po, end])),
-                v1, 0.0)
+        return (phases_of_lists([*h, (s_cut - end) / v1], [*jk, 0.0], [*ac, 0.0],
+                                [*ve, v1], [*po, end]), v1, 0.0)
     goal = s_cut - s
     lo, hi, t = 0.0, d, d * 0.5
     for _ in range(60):
@@ -220,8 +255,7 @@ def cut_lists(h: list, jk: list, ac: list, ve: list, po: list,
             break
         t = t_new
     n = idx + 1
-    out = Phases(np.array([*h[:idx], t]), np.array(jk[:n]), np.array(ac[:n]),
-                 np.array(ve[:n]), np.array(po[:n]))
+    out = phases_of_lists([*h[:idx], t], jk[:n], ac[:n], ve[:n], po[:n])
     return out, v + a * t + j * t * t / 2.0, a + j * t
 
 
@@ -229,7 +263,7 @@ def feed_change_phases(s0: float, v0: float, a0: float, V: float, A: float,
                        J: float) -> Phases | None:
     """`feed_change_lists` as `Phases` (None where it is None)."""
     got = feed_change_lists(s0, v0, a0, V, A, J)
-    return None if got is None else Phases(*(np.array(x, dtype=float) for x in got))
+    return None if got is None else phases_of_lists(*got)
 
 
 def feed_change_lists(s0: float, v0: float, a0: float, V: float, A: float,

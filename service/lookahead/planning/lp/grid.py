@@ -140,6 +140,42 @@ def feature_steps(s: np.ndarray, d2: np.ndarray, d3: np.ndarray, path_scale: np.
     return step
 
 
+def limit_curve_feed(d2: np.ndarray, d3: np.ndarray, amax: np.ndarray,
+                     jmax: np.ndarray) -> np.ndarray:
+    """The feed (path units / s) at which one axis alone reaches its acceleration or jerk
+    limit from the geometry at constant feed, per sample: min over axes of
+    sqrt(amax_k / |x_ss,k|) and cbrt(jmax_k / |x_sss,k|) (d2, d3: x_ss, x_sss, each
+    (n, naxes), axis units per path unit^2, ^3). Not a bound on the plan (the path
+    acceleration and jerk terms can cancel the geometric ones), an estimate of where the
+    plan must be slow because the path bends. The velocity limits are left out: at its
+    velocity cap the feed is steady, with nothing for the reconstruction to follow
+    (with them the tube's windows had 1.4x the nodes for the same plan)."""
+    with np.errstate(divide="ignore"):
+        v = np.minimum(np.sqrt(amax / np.abs(d2)), np.cbrt(jmax / np.abs(d3)))
+    return np.min(v, axis=1)
+
+
+def limit_curve_steps(feed: np.ndarray, h: float, v_top: float) -> np.ndarray:
+    """The node spacing wanted where the limit-curve feed is `feed` (`limit_curve_feed`,
+    path units / s): h feed / v_top, so that an interval takes no longer at that feed
+    than an interval h long at v_top (the feed the nominal spacing h is made for,
+    `planner.default_grid_step`), clipped to [MIN_STEP_FRACTION h, h] and taken as the
+    smallest over each sample and its neighbours.
+
+    Why (issue 13): the quintic reconstruction between two nodes follows the LP's path
+    jerk only to within the change the jerk-change rows allow per node (a fixed fraction
+    of jmax), so nodes far apart in time hold the jerk nearly constant over long times:
+    on a uniform grid the polar dome's pole (feed ~100 mm/s, nodes 2.8 mm = 30-50 ms
+    apart) planned 2.14 s, and cam-style's locks (x_sss changes within 1.5 mm at
+    690 mm/s, no refinement by `feature_steps`) 7.94 s after 6 failed repairs and a
+    retry; with these steps 1.79 s and 7.52 s (whole job, fast corpus). No new constant:
+    the time per interval is the nominal grid's."""
+    step = np.clip(h * feed / v_top, MIN_STEP_FRACTION * h, h)
+    step[1:] = np.minimum(step[1:], step[:-1])
+    step[:-1] = np.minimum(step[:-1], step[1:])
+    return step
+
+
 def refine_grid(nodes: np.ndarray, stop_idx: np.ndarray, s_feat: np.ndarray,
                 step: np.ndarray, first: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """More nodes wherever the wanted spacing `step` (given at arc lengths s_feat,

@@ -64,6 +64,8 @@ from lookahead.planning.lp.grid import (
     extend_grid,
     feature_samples,
     feature_steps,
+    limit_curve_feed,
+    limit_curve_steps,
     near_reversals,
     refine_grid,
     split_near,
@@ -194,6 +196,29 @@ def pinned_share(s: np.ndarray, q: np.ndarray, pinned: np.ndarray) -> float:
     return float(np.sum(dt[touch]))
 
 
+def lift_dips(q: np.ndarray, q_hi: np.ndarray, fixed: np.ndarray) -> np.ndarray:
+    """The velocity+acceleration solution q as the jerk rows' linearization point: every
+    free node (not `fixed`, a boolean mask) more than RELINEARIZE_RATIO below both
+    neighbours raised to the lower of them, at most to its bound q_hi (path
+    units^2 / s^2).
+
+    Why: the acceleration rows take q' from central differences, which do not see a
+    node-to-node zig-zag of q, so the v+a LP's vertex may alternate between high values
+    and ~0 on an unequally spaced grid (issue 13: c-fourier-xc on the limit-curve grid,
+    v* = 739, 0, 823 mm/s at s = 11632 mm, where nothing slows the path); the tangent
+    jerk row at q* ~ 0 allows at most ~3 q*, pinning the node near rest (the first jerk
+    pass 14.85 s against 11.96 s with the dips lifted). Only such deep dips: lifting
+    every lower node (also the shallow zig-zags, 355, 434, 370 mm/s) made a repair pass
+    of the dwell layer's replan from 959 mm/s stall (an engine fallback), as a tangent
+    far above the solution pins a node too (RELINEARIZE_RATIO)."""
+    out = q.copy()
+    lo = np.minimum(q[:-2], q[2:])
+    inner = out[1:-1]
+    dip = (inner * RELINEARIZE_RATIO < lo) & ~fixed[1:-1]
+    inner[dip] = np.minimum(lo[dip], q_hi[1:-1][dip])
+    return out
+
+
 def stuck_at(s: np.ndarray, trouble: list[float], s_bad: float) -> bool:
     """Whether the arc length s_bad lies within STUCK_REACH grid intervals (nodes s) of at
     least STUCK_REPEATS of the earlier places `trouble` (all path units)."""
@@ -244,13 +269,20 @@ class LPPlanner:
     re-linearizations. max_repairs: check/tighten rounds (each re-solves one jerk pass).
     margins: initial factors on (vmax, amax, jmax) in the LP rows (the jerk margin absorbs
     most of the overshoot between nodes, so repairs are rare). jerk_step: the largest
-    change of the nodal axis jerk between neighbouring nodes, as a fraction of jmax (a
+    change of the nodal path jerk's axis term x' j between neighbouring nodes, as a
+    fraction of jmax (`rows.jerk_change_rows`; a
     regularizer; where the jerk swings from +J to -J within a few nodes the quintic
     reconstruction overshoots the nodal value: at 0.3 the tubes needed 2-5 repair rounds
     per job, at 0.15 none, for +0.02 % winding time). check_step: spacing of the analytic
     verification, in units of the request's dt. envelope_jerk: factor on the path jerk of
     the start/stop S-curve envelopes (the reconstruction overshoots most on the graded grid
     near rest).
+    limit_curve_grid: refine the grid where the limit-curve feed is low
+    (`lp.grid.limit_curve_steps`; None: on, except for OSQP, whose ADMM stopped at
+    max_iter on the polar dome's refined LPs 5-12 % below HiGHS's objective, against
+    0.02 % on the bends-only grid). axis_jerk_change: the jerk-change rows on the whole
+    axis jerk, as before issue 13 (`rows.jerk_change_rows`; None: only for OSQP, which did
+    not converge with the path-jerk rows on n-butterfly).
     reuse: continue the last plan when a request starts on it (`Seam`, `plan`).
     seam_va_pass: at a seam, solve the velocity+acceleration LP for the jerk rows'
     linearization point beyond the reused nodes (default: the upper bounds there; the same
@@ -291,6 +323,8 @@ class LPPlanner:
         brake_jerk: float = BRAKE_JERK,
         elastic: bool = True,
         objective: str = "distance",
+        limit_curve_grid: bool | None = None,
+        axis_jerk_change: bool | None = None,
     ) -> None:
         if objective not in OBJECTIVES:
             raise ValueError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
@@ -321,6 +355,9 @@ class LPPlanner:
         self.max_repairs = max_repairs
         self.margins = margins
         self.verify = verify
+        self.limit_curve_grid = solver != "osqp" if limit_curve_grid is None else limit_curve_grid
+        self.axis_jerk_change = (solver == "osqp" if axis_jerk_change is None
+                                 else axis_jerk_change)
 
     # --- public -----------------------------------------------------------------------
     def plan(self, request: PlanRequest, fixed_head: np.ndarray | None = None) -> PlanResult:
@@ -448,6 +485,36 @@ class LPPlanner:
             self._split = None
 
     def _plan_seam(self, request: PlanRequest, seam: Seam) -> PlanResult:
+        return self._plan_on_seam(request, seam)
+
+    def _plan_on_seam(self, request: PlanRequest, seam: Seam) -> PlanResult:
+        """`_plan` at a seam, with the stuck rule of a plan from scratch (`_plan_cold`):
+        repairs stuck at one place give up at once for the seam's fresh grid split there
+        (`lp.grid.split_near`, the reused nodes untouched); if that fails too, the plain
+        seam plan with every repair round (as before the rule).
+
+        Why: the whole-job LP splits its grid where repairs are stuck (the near-stops of
+        c-fourier-xc at s = 11309 and 11585), a window's seam plan did not: it tightened
+        the same nodes 5 times (jerk factors ~0.6 there) and planned the dip 20 % slower,
+        0.12 s of the windowed LP's 0.65 % over the whole-job LP (issue 13)."""
+        if seam.reuses_all:
+            return self._plan(request, None, seam)
+        self._stuck_rule = True
+        try:
+            return self._plan(request, None, seam)
+        except PlanningError as exc:
+            if not getattr(exc, "stuck", False):
+                raise
+            places = exc.places  # type: ignore[attr-defined]
+        finally:
+            self._stuck_rule = False
+        self._split = places
+        try:
+            return self._plan(request, None, seam)
+        except PlanningError:
+            pass
+        finally:
+            self._split = None
         return self._plan(request, None, seam)
 
     def _plan_half_frozen(self, request: PlanRequest, seam: Seam) -> PlanResult:
@@ -461,8 +528,8 @@ class LPPlanner:
         i = seam.first
         j0 = i + seam.n_reuse - FIXED_NODES - back
         if j0 <= i or seam.reuses_all:
-            return self._plan(request, None, seam)
-        sub = self._plan(request, None, Seam(last, j0, FIXED_NODES, 0.0))
+            return self._plan_on_seam(request, seam)
+        sub = self._plan_on_seam(request, Seam(last, j0, FIXED_NODES, 0.0))
         assert self._last is not None
         self._last = join_last(last, i, j0, self._last, request)
         full = self._last.profile
@@ -550,7 +617,7 @@ class LPPlanner:
         repairs = 0
         worst = float("nan")
         trouble: list[float] = []  # where each repair round's worst excess was (s)
-        may_split = seam is None and head is None and self._stuck_rule
+        may_split = self._stuck_rule and (seam is not None or head is None)
         while True:
             full = self._profile(request, plan, a_start)
             profile = slice_profile(full, t_cut) if t_cut > 0.0 else full
@@ -660,7 +727,14 @@ class LPPlanner:
         else:
             s, stop_idx = extend_grid(last.geo.s[reused], float(request.s_end), h,
                                       request.v_end <= REST, corners, old_stops)
-            s, stop_idx = self.refine(request.path, s, stop_idx, h, first=seam.n_reuse - 1)
+            s, stop_idx = self.refine(request.path, s, stop_idx, h, first=seam.n_reuse - 1,
+                                      limits=self._grid_limits(request))
+            if self._split is not None:  # `_plan_on_seam`: the fresh nodes only
+                k = seam.n_reuse - 1
+                tail, tail_stops = split_near(s[k:], stop_idx[stop_idx >= k] - k,
+                                              self._split[self._split > s[k]])
+                s = np.concatenate([s[:k], tail])
+                stop_idx = np.concatenate([stop_idx[stop_idx < k], tail_stops + k])
             geo = GridGeometry.join(last.geo.take(reused),
                                     self.geometry(request.path, s[seam.n_reuse:]))
         tight = Tightening.uniform(geo.n_nodes, *self.margins)
@@ -681,21 +755,33 @@ class LPPlanner:
         corners = self.corners(request.path, h)
         s, stop_idx = build_grid(s0, s1, h, request.start.v <= REST, request.v_end <= REST,
                                  corners)
-        s, stop_idx = self.refine(request.path, s, stop_idx, h)
+        s, stop_idx = self.refine(request.path, s, stop_idx, h, limits=self._grid_limits(request))
         if self._split is not None:
             s, stop_idx = split_near(s, stop_idx, self._split)
         return s, stop_idx
 
+    def _grid_limits(self, request: PlanRequest) -> AxisLimits | None:
+        """The limits `refine` follows the limit curve of (None: `limit_curve_grid` off)."""
+        return request.limits if self.limit_curve_grid else None
+
     def refine(self, path: Path, s: np.ndarray, stop_idx: np.ndarray, h: float,
-               first: int = 0) -> tuple[np.ndarray, np.ndarray]:
+               first: int = 0, limits: AxisLimits | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
         """Finer nodes where the path bends sharply (`lp.grid.refine_grid`), from node
         `first` on, judged on samples FEATURE_SAMPLES per nominal step h apart, and finer
-        where a bend hides between two of them (`lp.grid.feature_samples`)."""
+        where a bend hides between two of them (`lp.grid.feature_samples`); with `limits`,
+        also where the limit-curve feed is low (`lp.grid.limit_curve_steps`: nodes no
+        further apart in time there than h at the top feed)."""
         lo, hi = float(s[first]), float(s[-1])
         if not hi > lo:
             return s, stop_idx
         s_feat, d = feature_samples(path, lo, hi, h / FEATURE_SAMPLES, s[stop_idx])
-        step = feature_steps(s_feat, d[2], d[3], np.asarray(path.path_scale, dtype=float), h)
+        scale = np.asarray(path.path_scale, dtype=float)
+        step = feature_steps(s_feat, d[2], d[3], scale, h)
+        if limits is not None:
+            feed = limit_curve_feed(d[2], d[3], limits.amax, limits.jmax)
+            v_top = float(np.linalg.norm(limits.vmax * scale))
+            step = np.minimum(step, limit_curve_steps(feed, h, v_top))
         return refine_grid(s, stop_idx, s_feat, step, first)
 
     def solve_grid(
@@ -743,6 +829,7 @@ class LPPlanner:
             q_star = np.concatenate([q_star_head, q_hi[q_star_head.size:]])
         if q_star is None:
             q_star = self._solve(plan, weight, q_lo, q_hi, base, geo.n_nodes, record=False)
+            q_star = lift_dips(q_star, q_hi, np.isin(np.arange(geo.n_nodes), list(fixed)))
             if q_star_head is not None:
                 q_star = np.concatenate([q_star_head, q_star[q_star_head.size:]])
         q_floor = 1e-6 * float(np.max(q_hi))
@@ -763,7 +850,8 @@ class LPPlanner:
         k = 0
         while True:
             rows = [*base, jerk_rows(geo, lim.jmax, tight.jerk, q_star, q_floor, knot),
-                    jerk_change_rows(geo, lim.jmax, q_star, q_floor, self.jerk_step, rest)]
+                    jerk_change_rows(geo, lim.jmax, q_star, q_floor, self.jerk_step, rest,
+                                     axis_jerk=self.axis_jerk_change)]
             q = self._solve(plan, self._pass_weight(weight, q_star, k > 0 or start_q is not None),
                             q_lo, q_hi, rows, geo.n_nodes, record=True)
             for i, val in fixed.items():  # exactly, not to the solver's rounding

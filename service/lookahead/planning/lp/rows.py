@@ -374,38 +374,68 @@ def nodal_acceleration(geo: GridGeometry, q: np.ndarray) -> np.ndarray:
     return geo.d2[nodes] * q[nodes, None] + 0.5 * geo.d1[nodes] * dq[:, None]
 
 
+def path_jerk_operator(geo: GridGeometry) -> tuple[np.ndarray, np.ndarray]:
+    """Coefficients of q''/2 at the interior nodes, on (i-1, i, i+1): the path jerk
+    d3s/dt3 = sqrt(q) q''/2 per unit sqrt(q). Returns (coef (N-1, 3), node indices)."""
+    _, w2 = fd_weights(geo.s)
+    return 0.5 * w2, np.arange(1, geo.n_nodes - 1)
+
+
 def jerk_change_rows(
     geo: GridGeometry, jmax: np.ndarray, q_star: np.ndarray, q_floor: float, kappa: float,
-    skip: np.ndarray | None = None,
+    skip: np.ndarray | None = None, axis_jerk: bool = False,
 ) -> Rows:
-    """|j_i+1 - j_i| <= kappa jmax_k between neighbouring interior nodes, with the jerk
-    surrogate j_i = sqrt(q*_i) L_k(q) (exact at q = q*).
+    """|j_i+1 - j_i| <= kappa min_k jmax_k / |x'_k| between neighbouring interior nodes
+    (the change of the axis jerk's path-jerk term x'_k j within kappa jmax_k for every
+    axis k), with the path jerk surrogate j_i = sqrt(q*_i) q''_i / 2 (exact at q = q*)
+    and |x'_k| the mean of the two nodes' values.
 
     Not a machine limit but a regularizer: without it the LP's optimal vertices let the
     nodal jerk alternate between +J and -J node to node (q zig-zags, which the central
     differences of q' do not see), and any smooth profile through such nodes overshoots.
+    It bounds the change of the path's own motion only (the path jerk, which the quintic
+    reconstruction has to follow between the nodes), not of the axis jerk's geometric
+    terms x_sss v^3 and 3 x_ss v a: the check evaluates those on the exact geometry, so
+    they carry no reconstruction error. A row on the whole axis jerk (before issue 13's
+    fix) also held the change of x_sss v^3 to 0.15 jmax per node, and where x_sss turns
+    within a few nodes (a dome's pole, a helix's turnaround) it forced the feed down:
+    the polar dome 2.43 s against 2.14 s, the short helix 2.61 s against 2.24 s, either
+    without a repair (the fine-grid reference LP: 1.70 s, 2.15 s).
     skip: node indices (rest points) whose neighbours get no such row: next to a fixed
     q = 0 the linearized row can pin the neighbour to 0 as well (a stalled interval).
+    axis_jerk: the rows before issue 13's fix instead, |j_k,i+1 - j_k,i| <= kappa jmax_k
+    per axis on the whole axis jerk surrogate sqrt(q*) L_k(q) (`jerk_operator`), for
+    OSQP: its ADMM did not converge on n-butterfly's first jerk pass with the path-jerk
+    rows (10-18 % outside the limit rows after 30000 iterations).
     """
     n = geo.n_nodes
     root = np.sqrt(np.maximum(q_star, q_floor))
-    parts = []
-    for k in range(geo.d1.shape[1]):
-        coef, nodes = jerk_operator(geo, k)
+    nodes = np.arange(1, n - 1)
+    m = nodes.size - 1
+    keep = np.ones(m, dtype=bool)
+    if skip is not None and skip.size:
+        near = np.zeros(n + 2, dtype=bool)
+        for off in (-1, 0, 1):
+            near[np.clip(skip + off, 0, n - 1)] = True
+        keep = ~(near[nodes[:-1]] | near[nodes[1:]])
+
+    def rows_of(coef: np.ndarray, rows: np.ndarray, bound: np.ndarray) -> Rows:
+        """Row r (of the kept `rows`): coef's j at node r+2 minus at node r+1, on
+        columns r .. r+3, within +-bound."""
         c = root[nodes, None] * coef
-        m = nodes.size - 1
-        # row r: j at node r+2 minus j at node r+1, on columns r .. r+3
         band = np.zeros((m, 4))
         band[:, 1:] += c[1:]
         band[:, :3] -= c[:-1]
-        keep = np.ones(m, dtype=bool)
-        if skip is not None and skip.size:
-            near = np.zeros(n + 2, dtype=bool)
-            for off in (-1, 0, 1):
-                near[np.clip(skip + off, 0, n - 1)] = True
-            keep = ~(near[nodes[:-1]] | near[nodes[1:]])
-        diff = banded(band[keep], nodes[:-1][keep] - 1, n)
-        bound = np.full(int(keep.sum()), kappa * jmax[k])
-        parts.append(Rows(diff, -bound, bound))
-    return Rows.stack(parts, n)
+        return Rows(banded(band[rows], nodes[:-1][rows] - 1, n), -bound, bound)
+
+    if axis_jerk:
+        return Rows.stack([rows_of(jerk_operator(geo, k)[0], keep,
+                                   np.full(int(keep.sum()), kappa * jmax[k]))
+                           for k in range(geo.d1.shape[1])], n)
+    # one row per node pair, at the axis that binds (per-axis rows would be parallel)
+    tangent = 0.5 * (np.abs(geo.d1[nodes[:-1]]) + np.abs(geo.d1[nodes[1:]]))
+    with np.errstate(divide="ignore"):
+        path_j = np.min(jmax[None, :] / tangent, axis=1)  # path jerk at the axis limits
+    keep &= np.isfinite(path_j)
+    return rows_of(path_jerk_operator(geo)[0], keep, kappa * path_j[keep])
 
