@@ -154,7 +154,7 @@ class SCurveSolver:
 
         Scalar Python over the <= 9 phases (numpy's per-call overhead on them made this
         90 % of a Ruckig segment's cost in the planner's scans); the same float
-        operations as `_phases_reference`, the numpy form it replaced."""
+        operations as the numpy form it replaced (kept in its test as the reference)."""
         prof = self._traj.profiles[0][0]
         # a, v, p have one entry more than t, j (the end state): drop it
         t, j, a, v, p = prof.t, prof.j, prof.a, prof.v, prof.p
@@ -180,27 +180,6 @@ class SCurveSolver:
                         [r[2] * scale_a for r in rows], [r[3] * scale_v for r in rows],
                         [s0 + r[4] * L for r in rows]], dtype=float).reshape(5, len(rows))
         return Phases(duration=arr[0], jerk=arr[1], acc=arr[2], vel=arr[3], pos=arr[4])
-
-    def _phases_reference(self, s0: float, L: float, T: float, V: float) -> Phases:
-        """`_phases` as numpy array operations (the reference its test compares with)."""
-        prof = self._traj.profiles[0][0]
-        cols = [prof.t, prof.j, prof.a[:7], prof.v[:7], prof.p[:7]]
-        brake = prof.brake
-        if brake.duration > 0:
-            cols = [list(b[:2]) + list(c) for b, c in zip(
-                (brake.t, brake.j, brake.a, brake.v, brake.p), cols, strict=True)]
-        arr = np.array(cols)
-        arr = arr[:, arr[0] > 0]
-        vel = arr[3] * (L / T)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tau = np.where(arr[1] != 0.0, -arr[2] / arr[1], -1.0)
-        inside = (tau > 0.0) & (tau < arr[0])
-        dip = np.where(inside, arr[3] - arr[2] ** 2 / (2.0 * np.where(inside, arr[1], 1.0)),
-                       arr[3]) * (L / T)
-        if vel.size and min(vel.min(), dip.min()) < -1e-9 * V:
-            raise SegmentInfeasibleError("motion would reverse")
-        return Phases(duration=arr[0] * T, jerk=arr[1] * (L / T**3), acc=arr[2] * (L / T**2),
-                      vel=vel, pos=s0 + arr[4] * L)
 
 
 def end_state(phases: Phases) -> tuple[float, float, float]:

@@ -476,11 +476,13 @@ class LPPlanner:
                 if length / finer > MAX_REFINED_NODES:
                     raise
 
-    def _plan_split(self, request: PlanRequest, places: np.ndarray) -> PlanResult:
-        """A plan from scratch on the grid split near `places` (s, path units)."""
+    def _plan_split(self, request: PlanRequest, places: np.ndarray,
+                    seam: Seam | None = None) -> PlanResult:
+        """A plan on the grid split near `places` (s, path units): from scratch, or at
+        `seam` with only its fresh nodes split."""
         self._split = places
         try:
-            return self._plan(request, None, None)
+            return self._plan(request, None, seam)
         finally:
             self._split = None
 
@@ -508,13 +510,10 @@ class LPPlanner:
             places = exc.places  # type: ignore[attr-defined]
         finally:
             self._stuck_rule = False
-        self._split = places
         try:
-            return self._plan(request, None, seam)
+            return self._plan_split(request, places, seam)
         except PlanningError:
             pass
-        finally:
-            self._split = None
         return self._plan(request, None, seam)
 
     def _plan_half_frozen(self, request: PlanRequest, seam: Seam) -> PlanResult:
