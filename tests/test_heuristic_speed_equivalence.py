@@ -1,18 +1,24 @@
 """Issue 14 (heuristic speed): the faster forms of the heuristic's inner functions give
 the same results as the simple forms they replaced (kept here as references: numpy array
 operations over every element, loops on numpy scalars), bit for bit on random inputs, and
-a layout that cannot beat the best verified profile is not verified (the same plan)."""
+a layout that cannot beat the best verified profile is not verified (the same plan), and
+Ruckig segments that `reach` refuses are ones Ruckig refuses (the same plans)."""
 
 from __future__ import annotations
 
+import math
+from dataclasses import replace
+
 import numpy as np
 import pytest
+from ruckig import Ruckig
 
 from lookahead.geometry import fit_points
 from lookahead.limits import AxisLimits
 from lookahead.planning.base import PathState, PlanRequest
 from lookahead.planning.heuristic import HeuristicPlanner, profile_build
 from lookahead.planning.heuristic import planner as planner_mod
+from lookahead.planning.heuristic import scurve as scurve_mod
 from lookahead.planning.heuristic.path_limits import (
     BUDGET_FRACTIONS,
     BudgetShares,
@@ -26,6 +32,7 @@ from lookahead.planning.heuristic.path_limits import (
     segment_budgets,
 )
 from lookahead.planning.heuristic.profile_build import build_profile, state_at_s
+from lookahead.planning.heuristic.reach import _brake_feed, surely_refused
 from lookahead.planning.heuristic.scurve import (
     Phases,
     SCurveSolver,
@@ -430,3 +437,113 @@ def test_split_by_loss_matches_the_per_segment_loop():
             got = split_by_loss(edges, vlim, starts, rel, abs_loss, step)
             ref = _split_by_loss_reference(edges, vlim, starts, rel, abs_loss, step)
         assert np.array_equal(got, ref)
+
+
+# --- Ruckig segments out of reach -------------------------------------------------------
+
+def _raw_ruckig_ok(monkeypatch, solver: SCurveSolver, *args, a1: float) -> bool:
+    """Whether Ruckig itself finds the segment (the reach test switched off)."""
+    monkeypatch.setattr(scurve_mod, "surely_refused", lambda *a: False)
+    try:
+        solver.segment(0.0, *args, a1=a1)
+        return True
+    except SegmentInfeasibleError:
+        return False
+    finally:
+        monkeypatch.undo()
+
+
+def _near_reach_cases(rng: np.random.Generator, n: int):
+    """Segments (L, v0, a0, v1, a1, V, A, J) whose end feed lies a relative 1e-9 .. 0.1
+    on either side of the bound of `reach` (the brake, forwards or played backwards, or
+    the energy bound), over wide scales; caps from the larger feed to 100x it."""
+    for _ in range(n):
+        A, J = 10 ** rng.uniform(1, 4), 10 ** rng.uniform(2, 6)
+        v1 = 10 ** rng.uniform(-2, 3)
+        a0, a1 = (rng.uniform(-1, 1) * A * rng.choice([0.0, 0.3, 1.0]) for _ in range(2))
+        L = 10 ** rng.uniform(-4, 2) * max(v1, 1.0) / 10
+        A = max(A, abs(a0), abs(a1))
+        near = 1.0 + rng.choice([-1.0, 1.0]) * 10 ** rng.uniform(-9, -1)
+        if rng.uniform() < 0.25:
+            v0 = math.sqrt(max(v1 * v1 - 2.0 * A * L, 0.0)) * near
+        else:
+            d = _brake_feed(L, v1, -a1, A, J)
+            v0 = (d if d else 0.5 * v1) * near
+        if rng.uniform() < 0.5:  # the forward brake instead of the backward one
+            v0, v1, a0, a1 = v1, v0, -a1, -a0
+        if not v0 > 0.0:
+            continue
+        V = max(v0, v1) * rng.choice([1.0, 1.0 + 1e-7, rng.uniform(1, 3), rng.uniform(1, 100)])
+        yield L, v0, a0, v1, a1, V, A, J
+
+
+def test_the_reach_test_refuses_only_what_ruckig_refuses(monkeypatch):
+    """`reach.surely_refused` never refuses a segment Ruckig finds, on segments placed
+    right at its bounds (it does refuse most of those clearly beyond them), and not the
+    motion that passes the jerk-limited rise in distance by braking first (a rise is no
+    bound, only the energy and the brakes are)."""
+    solver = SCurveSolver()
+    rng = np.random.default_rng(12)
+    refused = 0
+    for L, v0, a0, v1, a1, V, A, J in _near_reach_cases(rng, 3000):
+        if surely_refused(L, v0, a0, v1, a1, V, A, J):
+            refused += 1
+            assert not _raw_ruckig_ok(monkeypatch, solver, L, v0, a0, v1, V, A, J, a1=a1), \
+                (L, v0, a0, v1, a1, V, A, J)
+    assert refused > 500
+    faster = (6.143581520780339, 4.594683863517478, 63.511081189489154, 104.18126205418301,
+              120.65383111388603, 1195.759487262128, 7398.174337635069)
+    assert _raw_ruckig_ok(monkeypatch, solver, *faster, a1=1159.5964758649125)
+    L, v0, a0, v1, V, A, J = faster
+    assert not surely_refused(L, v0, a0, v1, 1159.5964758649125, V, A, J)
+
+
+def test_a_segment_out_of_reach_is_refused_without_ruckig():
+    """Beyond the brake (too short to slow down), the energy bound (too short to speed
+    up) or the cap, `segment` refuses without asking Ruckig."""
+
+    class NoRuckig:
+        def calculate(self, *args):
+            raise AssertionError("Ruckig was asked")
+
+    solver = SCurveSolver()
+    solver._otg = NoRuckig()
+    for v0, a0, v1, a1 in ((100.0, 0.0, 10.0, 0.0), (10.0, 0.0, 100.0, 0.0),
+                           (100.0, 500.0, 90.0, -200.0), (50.0, 0.0, 120.0, 0.0)):
+        with pytest.raises(SegmentInfeasibleError):
+            solver.segment(0.0, 0.5, v0, a0, v1, 110.0, 1000.0, 1e5, a1=a1)
+
+
+def _wiggly_request() -> PlanRequest:
+    path = fit_points(np.cumsum(np.random.default_rng(7).normal(size=(40, 2)), axis=0) * 3.0,
+                      np.ones(2), "cubic")
+    return PlanRequest(path, XY, PathState(0.0), path.length, dt=0.001)
+
+
+@pytest.mark.parametrize("make", [_circle_request, _wiggly_request])
+def test_plans_with_the_reach_test_are_the_same(make, monkeypatch):
+    """The heuristic's plans with the reach test equal those of asking Ruckig every
+    segment, bit for bit (also from a moving start: the brake and the rescue paths), with
+    fewer Ruckig calls."""
+    calls = []
+    calculate = Ruckig.calculate
+
+    class Counted(Ruckig):
+        def calculate(self, *args):
+            calls.append(1)
+            return calculate(self, *args)
+
+    monkeypatch.setattr(scurve_mod, "Ruckig", Counted)
+    request = make()
+    half = replace(request, start=PathState(0.3 * request.s_end, 60.0, -400.0))
+    fast, n_fast = [], 0
+    for req in (request, half):
+        fast.append(HeuristicPlanner().plan(req))
+    n_fast = len(calls)
+    monkeypatch.setattr(scurve_mod, "surely_refused", lambda *a: False)
+    calls.clear()
+    for req, got in zip((request, half), fast, strict=True):
+        ref = HeuristicPlanner().plan(req)
+        assert np.array_equal(got.profile.s_of_t.c, ref.profile.s_of_t.c)
+        assert np.array_equal(got.profile.s_of_t.x, ref.profile.s_of_t.x)
+    assert n_fast < len(calls)

@@ -193,7 +193,7 @@ def _merge_span(b: SegmentBudgets, cap: np.ndarray, solve, out: np.ndarray, moti
     k .. k + m - 1 onto the state at junction k + m, split into per-segment motions and
     the states at the junctions between; False (nothing changed) if there is none. The
     motion must pass each junction within its cap (0 at a corner: no merge across it)."""
-    if np.any(cap[k + 1:k + m] <= 0.0):
+    if any(c <= 0.0 for c in cap[k + 1:k + m].tolist()):
         return False
     motion = solve(k, out[k], out[k + m], m)
     if motion is None:
@@ -417,6 +417,7 @@ def chain(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: np.ndarra
     A_sc[0] = max(A_sc[0], min(A_first, A_seg[0]))
     stats = {"rises": 0, "blends": 0, "backtracks": 0}
     s0s, Ls, Vs, As, Js = (x.tolist() for x in (b.s0, b.L, b.V, A_seg, b.J))
+    spans: dict[tuple[int, int], float] = {}  # np.sum of b.L over k .. k + m - 1
 
     def solve(k: int, x0, x1, m: int = 1, length: float | None = None) -> Phases | None:
         """Segments k .. k + m - 1 as one Ruckig motion from state x0 to state x1 (over
@@ -426,9 +427,13 @@ def chain(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: np.ndarra
             if length is not None:
                 L = length
         else:
-            sl = slice(k, k + m)
-            L, V = float(np.sum(b.L[sl])), float(np.min(b.V[sl]))
-            A, J = float(np.min(A_seg[sl])), float(np.min(b.J[sl]))
+            # numpy's sum and min over the slices, without numpy's per-call cost on a few
+            # elements (min is exact; the sum is numpy's own, kept per span: `_land_back`
+            # asks for the same spans again and again)
+            L = spans.get((k, m))
+            if L is None:
+                L = spans[k, m] = float(np.sum(b.L[k:k + m]))
+            V, A, J = min(Vs[k:k + m]), min(As[k:k + m]), min(Js[k:k + m])
         A = max(A, abs(x0[1]), abs(x1[1]))
         # the scans' states sit exactly at the cap V (a rise towards V, cut): 1e-7 of room
         # keeps Ruckig's input check from refusing them by rounding (the velocity share

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 from ruckig import ControlInterface, InputParameter, Ruckig, RuckigError, Trajectory
 
+from lookahead.planning.heuristic.reach import surely_refused
+
 
 def transition_distance(v0: np.ndarray, v1: np.ndarray, A: np.ndarray,
                         J: np.ndarray) -> np.ndarray:
@@ -108,6 +110,8 @@ class SCurveSolver:
         """
         if not (L > 0 and V > 0 and A > 0 and J > 0):
             raise SegmentInfeasibleError(f"bad segment L={L} V={V} A={A} J={J}")
+        if surely_refused(L, v0, a0, v1, a1, V, A, J):  # what Ruckig would refuse too
+            raise SegmentInfeasibleError("the target state is out of reach")
         T = L / V
         inp = self._inp  # position 0 -> 1 under velocity 1: set in __init__
         inp.current_velocity = [v0 * T / L]
