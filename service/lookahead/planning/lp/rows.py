@@ -33,10 +33,38 @@ def midpoint_u(s: np.ndarray, u: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     """u at the interval midpoints (s_i + s_i+1) / 2: the cubic Hermite interpolant of the
     nodes' (u, du/ds = 1/sigma), as `sampled_check.analytic_ratios` locates u between
     nodes (the derivatives there within ~0.3 % on 1-3 mm intervals at the issue-13
-    Fourier path's near-cusp; an arc-length inversion costs far more)."""
+    Fourier path's near-cusp; an arc-length inversion costs far more). Not where ds/du
+    changes fast within the interval: `GridGeometry.sample` inverts exactly there
+    (`rough_intervals`)."""
     h = np.diff(s)
     du = 1.0 / sigma
     return 0.5 * (u[:-1] + u[1:]) + 0.125 * h * (du[:-1] - du[1:])
+
+
+#: an interval over which ds/du (sigma) at its nodes and its Hermite midpoint differs by
+#: more than this factor is "rough": the cubic Hermite u(s) of `midpoint_u` and
+#: `sampled_check.analytic_ratios` does not hold there, so its midpoint and the check's
+#: samples in it get the exact arc-length inversion. Where the smooth G-code fit of the
+#: 100k-line winding program leaves a corner blend for a long straight piece, sigma falls
+#: from 1.0 to 0.0034 within the blend's last 0.05 mm: the Hermite put u 0.94 (s ~0.9 mm)
+#: off in a 0.11 mm interval, the check read x_sss of the blend's middle (9 against 0.3
+#: per mm^2 on X) and every repair of the whole-job LP failed there (jerk 4-9x; with the
+#: marks it plans, 3000.4 s, 0 violations; c-corners-bspline-2d 1.35 % faster). Trades
+#: exact inversions (~30x an evaluation of x(u)) for the Hermite's error: measured on the
+#: fast corpus's whole-job grids, the midpoint's error in s left on unmarked intervals is
+#: at most 4.9 % of the interval at 1.5 (c-corners-bspline-2d; n-butterfly 1.3 %), 0.26 %
+#: at 1.25 (0-15 intervals marked per path, all on c-corners, c-cycloid, n-butterfly),
+#: 0.07 % at 1.1 (64); elsewhere sigma changes by < 5 % per interval.
+ROUGH_SIGMA_RATIO = 1.25
+
+
+def rough_intervals(sigma: np.ndarray, sigma_mid: np.ndarray) -> np.ndarray:
+    """(N,) True where sigma (ds/du) at the interval's two nodes (`sigma`, (N+1,)) and at
+    its midpoint (`sigma_mid`, (N,)) spans more than ROUGH_SIGMA_RATIO: a u(s) that a
+    cubic Hermite of the nodes' (u, 1/sigma) does not follow (`ROUGH_SIGMA_RATIO`)."""
+    both = np.stack([sigma[:-1], sigma[1:], sigma_mid])
+    lo, hi = np.min(both, axis=0), np.max(both, axis=0)
+    return ~(hi <= ROUGH_SIGMA_RATIO * lo)  # NaN or sigma 0: rough
 
 
 @dataclass(frozen=True)
@@ -45,7 +73,10 @@ class GridGeometry:
     u is the native parameter and sigma = ds/du at the nodes (for a cheap u(s) between
     them, `sampled_check.analytic_ratios`). mid: (x_s, x_ss, x_sss) at the N interval
     midpoints, each (N, naxes) (rows of NaN where unknown: a seam's joining interval),
-    for the midpoint jerk rows (`midpoint_jerk_rows`); None: no such rows."""
+    for the midpoint jerk rows (`midpoint_jerk_rows`); None: no such rows. rough: (N,)
+    True on intervals where that cheap u(s) does not hold (`rough_intervals`; a seam's
+    joining interval on its nodes' sigma alone): u there comes from the exact arc-length
+    inversion; None: not known (the cheap u(s) everywhere)."""
 
     s: np.ndarray
     d1: np.ndarray
@@ -54,18 +85,28 @@ class GridGeometry:
     u: np.ndarray | None = None
     sigma: np.ndarray | None = None
     mid: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    rough: np.ndarray | None = None
 
     @classmethod
     def sample(cls, path: Path, s: np.ndarray, midpoints: bool = True) -> GridGeometry:
+        """The geometry at the nodes s (path units, increasing); with `midpoints`, also at
+        the interval midpoints (u by `midpoint_u`, exact on rough intervals)."""
         s = np.asarray(s, dtype=float)
         u = path.u_of_s(s)
         d1, d2, d3, sigma = s_derivatives(path.eval_u(u, order=3), path.path_scale)
+        if s.size < 2:
+            return cls(s, d1, d2, d3, u, sigma, None, np.zeros(0, dtype=bool))
+        u_mid = midpoint_u(s, u, sigma)
+        d_mid = path.eval_u(u_mid, order=3 if midpoints else 1)
+        scale = np.asarray(path.path_scale, dtype=float)
+        rough = rough_intervals(sigma, np.linalg.norm(d_mid[1] * scale, axis=1))
         mid = None
-        if midpoints and s.size >= 2:
-            m1, m2, m3, _ = s_derivatives(path.eval_u(midpoint_u(s, u, sigma), order=3),
-                                          path.path_scale)
-            mid = (m1, m2, m3)
-        return cls(s, d1, d2, d3, u, sigma, mid)
+        if midpoints:
+            if np.any(rough):
+                u_mid[rough] = path.u_of_s(0.5 * (s[:-1] + s[1:])[rough])
+                d_mid[:, rough] = path.eval_u(u_mid[rough], order=3)
+            mid = s_derivatives(d_mid, path.path_scale)[:3]
+        return cls(s, d1, d2, d3, u, sigma, mid, rough)
 
     @property
     def n_nodes(self) -> int:
@@ -73,14 +114,16 @@ class GridGeometry:
 
     def take(self, nodes: slice) -> GridGeometry:
         """The geometry of a run of nodes (a replan reuses its previous grid's)."""
-        mid = None
-        if self.mid is not None:
-            start, stop, step = nodes.indices(self.n_nodes)
-            if step == 1:
+        mid = rough = None
+        start, stop, step = nodes.indices(self.n_nodes)
+        if step == 1:
+            if self.mid is not None:
                 mid = tuple(m[start:max(stop - 1, start)] for m in self.mid)
+            if self.rough is not None:
+                rough = self.rough[start:max(stop - 1, start)]
         return GridGeometry(self.s[nodes], self.d1[nodes], self.d2[nodes], self.d3[nodes],
                             None if self.u is None else self.u[nodes],
-                            None if self.sigma is None else self.sigma[nodes], mid)
+                            None if self.sigma is None else self.sigma[nodes], mid, rough)
 
     @staticmethod
     def join(head: GridGeometry, tail: GridGeometry) -> GridGeometry:
@@ -93,9 +136,15 @@ class GridGeometry:
             gap = np.full((1, head.d1.shape[1]), np.nan)  # the joining interval: unknown
             mid = tuple(np.concatenate([a, gap, b]) for a, b in zip(head.mid, tail.mid,
                                                                        strict=True))
+        rough = None  # the joining interval: judged on its two nodes' sigma alone
+        if (head.rough is not None and tail.rough is not None and head.sigma is not None
+                and tail.sigma is not None):
+            ends = np.array([head.sigma[-1], tail.sigma[0]])
+            gap = rough_intervals(ends, ends[:1])
+            rough = np.concatenate([head.rough, gap, tail.rough])
         return GridGeometry(np.concatenate([head.s, tail.s]), cat(head.d1, tail.d1),
                             cat(head.d2, tail.d2), cat(head.d3, tail.d3), cat(head.u, tail.u),
-                            cat(head.sigma, tail.sigma), mid)
+                            cat(head.sigma, tail.sigma), mid, rough)
 
 
 @dataclass
