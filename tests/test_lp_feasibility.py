@@ -40,7 +40,7 @@ from heuristic_paths import issue13_fourier_points
 from lookahead.checker import check_positions
 from lookahead.config import default_config
 from lookahead.geometry import fit_points, preset_points
-from lookahead.planning.base import PathState, PlanningError, PlanRequest
+from lookahead.planning.base import PathState, PlanRequest
 from lookahead.planning.lp import LPPlanner
 from lookahead.planning.lp.envelope import path_limits
 from lookahead.planning.lp.grid import feature_steps, near_reversals, refine_grid
@@ -162,17 +162,15 @@ def test_random_moving_starts_never_raise(tube, frac_s, frac_v, frac_a):
     assert rep.violations == 0, rep.first
 
 
-@pytest.mark.xfail(strict=True, raises=PlanningError, reason=(
-    "known LP failure (open, issue 13): a repair tightens the start zone's jerk rows, "
-    "the LP from the accelerating start becomes infeasible, the relaxation resets the "
-    "zone's factors to the limits and the repairs go round ('jerk 30.5 % after 3 "
-    "repairs (stuck there)'); a grid split there makes the start itself worse (11x)"))
 def test_an_accelerating_start_before_a_turnaround_plans(tube):
     """Found by `test_random_moving_starts_never_raise` when its file ran after the seam
     tests (hypothesis reached another example): v = 0.445 of the velocity cap, path
-    acceleration 0.4375 of the path limit, 4 mm before the plan's first jerk excess.
-    The heuristic continues this state within the limits (the example passes that
-    test's `assume`); the LP must as well."""
+    acceleration 0.4375 of the path limit, 4 mm before the plan's first jerk excess; the
+    start's own axis acceleration is 1.5 % above the request's limits. The heuristic
+    continues this state within the limits; the LP failed ("jerk 30.5 % after 3 repairs
+    (stuck there)"): a repair in the start zone made the LP infeasible, the relaxation
+    reset the zone's factors to the limits, and the excess came back; once the repairs
+    held, the start's own acceleration excess was refused as the plan's."""
     limits = MACHINE.limits.scaled(0.98)
     start = _state(tube, limits, 0.64, 0.4453125, 0.4375)
     req = PlanRequest(tube, limits, start, start.s + 1400.0, dt=MACHINE.dt)
