@@ -468,6 +468,30 @@ def test_dwell_layer_through_the_engine_has_no_fallback(corpus_all_few):
     assert row["violations"] == 0
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "known LP failure (open, issue 13): at the dwell turnaround 124 mm ahead (the v+a "
+    "solution's tip at 41 mm/s) every jerk pass stalls a node at q = 0, `_unstall` cannot "
+    "lift it, and the first pass's infinite time ends the passes: 'the jerk LP has no "
+    "solution'; re-linearizing the stalled passes gave a plan 6000x over the jerk limit"))
+def test_dwell_layer_window_braking_into_its_turnaround_plans(corpus_all_few):
+    """A window of the dwell layer that the engine asked for once HiGHS returned other
+    optimal vertices (lazy rows, not landed): braking at -1388 mm/s^2 from 958 mm/s,
+    124 mm before a dwell turnaround. The heuristic plans it (5.95 s); the LP must too."""
+    from lookahead.planning.base import PlanningError
+
+    p = corpus_all_few["w-hel-R100-a45-dwell-2mm"]
+    path, m = p.path(), p.config.machine
+    start = PathState(1321.9705411498176, 958.3663949185747, -1388.209015223072)
+    req = PlanRequest(path, m.limits.scaled(p.config.planner.margin), start, path.length,
+                      dt=m.dt)
+    try:
+        res = LPPlanner().plan(req)
+    except PlanningError as exc:
+        pytest.fail(f"the LP failed: {exc}")
+    rep = played(path, res.profile, m.limits.scaled(1.02), m.dt)
+    assert rep.violations == 0, rep.first
+
+
 def test_pchip_layer_whole_job_passes_the_checker_at_its_knots(corpus_all_few):
     """Used to break the jerk limit twice (22031 against 20000 mm/s^3): at the pchip's C1
     knots the checker's third difference adds 0.75 |jump of x_ss| v^2 / dt to the smooth
