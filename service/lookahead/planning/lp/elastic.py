@@ -14,7 +14,9 @@ row's bound magnitude b (scaled problem, `lp.solve.ScaledLP`):
 q = 0 beyond the zone satisfies every other row (the base problem's q = 0 argument), so
 this LP is feasible whatever the start (feasible by construction), and with a penalty
 above the rows' dual values (an exact penalty) its optimum has no excess whenever the
-hard LP has a solution. The planner's sampled check stays the judge of the result.
+hard LP has a solution. An equality row (the start slope row: the start state itself)
+costs EQUALITY_WEIGHT times more per unit, so a conflict gives way on the limit rows.
+The planner's sampled check stays the judge of the result.
 """
 
 from __future__ import annotations
@@ -31,6 +33,14 @@ from lookahead.planning.lp.solve import ScaledLP
 PENALTY_PER_NODE = 10.0
 #: bounds below this (in ScaledLP row units) count as this for the slack's unit
 BOUND_FLOOR = 1e-6
+#: the penalty on an equality row's slack (the start slope row q'(s_0)/2 = a0: the start
+#: state, not a limit) is this many times a limit row's. The profile starts at a0 exactly
+#: (`lp.profile`), so a slope row given way by da puts a jerk of ~da / (first interval's
+#: time) at t = 0 that no row sees (measured: tube-1450, a start at 394 mm/s, +1592 mm/s^2:
+#: the slope row gave 192 then 416 mm/s^2 as the repairs tightened the first nodes' jerk
+#: rows, 3.8x then 7.2x jmax at t = 0). 1e3: that start then keeps its slope within
+#: 1e-9; still finite, so the LP stays feasible whatever the start.
+EQUALITY_WEIGHT = 1e3
 
 
 def touching(A: sp.csr_matrix, zone: int) -> np.ndarray:
@@ -60,9 +70,11 @@ def elastic_lp(lp: ScaledLP, zone: int) -> tuple[ScaledLP, int]:
     vals = np.concatenate([-b, b])
     S = sp.csr_matrix((vals, (rows, cols - n)), shape=(lp.A.shape[0], 2 * m))
     A = sp.hstack([lp.A, S], format="csr")
-    penalty = PENALTY_PER_NODE * n
+    equal = lp.row_lower[sel] == lp.row_upper[sel]
+    weight = np.where(equal, EQUALITY_WEIGHT, 1.0)
+    penalty = PENALTY_PER_NODE * n * np.concatenate([weight, weight])
     nodes = None if lp.nodes is None else np.concatenate([lp.nodes, np.full(2 * m, np.nan)])
-    out = ScaledLP(np.concatenate([lp.cost, np.full(2 * m, penalty)]),
+    out = ScaledLP(np.concatenate([lp.cost, penalty]),
                    np.concatenate([lp.lower, np.zeros(2 * m)]),
                    np.concatenate([lp.upper, np.full(2 * m, np.inf)]),
                    A, lp.row_lower, lp.row_upper,
