@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from ruckig import ControlInterface, InputParameter, Ruckig, RuckigError, Trajectory
 
-from lookahead.planning.heuristic.reach import surely_refused
+from lookahead.planning.heuristic.reach import cubic_time_at, surely_refused
 
 
 def transition_distance(v0: np.ndarray, v1: np.ndarray, A: np.ndarray,
@@ -221,22 +221,7 @@ def cut_lists(h: list, jk: list, ac: list, ve: list, po: list,
             return None
         return (phases_of_lists([*h, (s_cut - end) / v1], [*jk, 0.0], [*ac, 0.0],
                                 [*ve, v1], [*po, end]), v1, 0.0)
-    goal = s_cut - s
-    lo, hi, t = 0.0, d, d * 0.5
-    for _ in range(60):
-        f = ((j / 6.0 * t + a / 2.0) * t + v) * t - goal
-        if f < 0:
-            lo = t
-        else:
-            hi = t
-        fp = (j / 2.0 * t + a) * t + v
-        t_new = t - f / fp if fp > 0 else 0.5 * (lo + hi)
-        if not lo <= t_new <= hi:
-            t_new = 0.5 * (lo + hi)
-        if abs(t_new - t) <= 1e-14 * max(d, 1e-300):
-            t = t_new
-            break
-        t = t_new
+    t = cubic_time_at(s_cut - s, v, a, j, d, d * 0.5, 60, 1e-14 * max(d, 1e-300))
     n = idx + 1
     out = phases_of_lists([*h[:idx], t], jk[:n], ac[:n], ve[:n], po[:n])
     return out, v + a * t + j * t * t / 2.0, a + j * t
