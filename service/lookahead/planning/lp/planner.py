@@ -1121,7 +1121,8 @@ class LPPlanner:
         factor (> 1) by which the check lets the first grid interval's acceleration exceed
         them, the start's own excess; None for a start within the limits. No plan from that
         state can do better at t = 0, and the excess was refused as the plan's own (the
-        repairs went round on it: 1.5 % on tube-1450 after a strict xfail test's start)."""
+        repairs went round on it: 1.5 % on tube-1450,
+        `test_an_accelerating_start_before_a_turnaround_plans`)."""
         st = request.start
         if st.v <= REST:
             return None
