@@ -9,6 +9,9 @@ Methods (`--methods`, comma-separated):
   with `LPPlanner()` (HiGHS) or `LPPlanner(solver="osqp")`; fallbacks, failed replans,
   replan times (p50/p99) and the wall time per motion time,
 - `engine-heuristic`: the same engine with the heuristic,
+- `engine-lp-rt`, `engine-heuristic-rt`: the engine in real-time mode (replans take over
+  ahead of the last sample, `lookahead.stream.ahead`; computed inline, with the batches of
+  the service's worker thread),
 - `nlp`: NLPPlanner on the whole job, short paths only (`NLP_MAX_*`),
 - `reference`: the fine-grid jerk LP of `bench/reference.py` (offline, non-long paths).
 Every plan is planned to the limits times the machine's `planner.margin` (as the engine
@@ -48,7 +51,7 @@ import numpy as np  # noqa: E402
 
 RESULTS = ROOT / "bench" / "results"
 METHODS = ("heuristic", "lp", "engine-lp", "engine-osqp", "nlp", "reference")
-ALL_METHODS = (*METHODS, "engine-heuristic")
+ALL_METHODS = (*METHODS, "engine-heuristic", "engine-lp-rt", "engine-heuristic-rt")
 #: the NLP (dense SQP, seconds per window) runs on paths at most this big
 NLP_MAX_POINTS, NLP_MAX_LENGTH = 2500, 3000.0
 #: samples per checker/sampling chunk (bounded memory on long jobs)
@@ -91,6 +94,27 @@ class TimedPlanner:
 
     def __getattr__(self, item: str):
         return getattr(self.inner, item)
+
+
+class AheadRecorder:
+    """An inline executor for a real-time engine that records, per replan computed
+    ahead, the motion time between the last produced sample and its take-over (`ahead_s`)
+    and how long it took (`compute_s`): a service would wait where compute_s > ahead_s."""
+
+    def __init__(self) -> None:
+        from lookahead.stream.ahead import InlineExecutor
+
+        self.inline = InlineExecutor()
+        self.k_next = 0  # the next sample the engine produces (kept by the caller)
+        self.dt = 0.0
+        self.rows: list[tuple[float, float]] = []
+
+    def submit(self, fn, /, *args, **kwargs):
+        k_at = args[3]  # plan_with_fallback(planner, fallback, request, k_at, ...)
+        t0 = time.perf_counter()
+        future = self.inline.submit(fn, *args, **kwargs)
+        self.rows.append(((k_at - self.k_next + 1) * self.dt, time.perf_counter() - t0))
+        return future
 
 
 class _Collect(logging.Handler):
@@ -198,6 +222,8 @@ def run_engine(p, method: str) -> dict:
     from lookahead.checker import LimitChecker
     from lookahead.stream.engine import Engine
 
+    realtime = method.endswith("-rt")
+    method = method.removesuffix("-rt")
     if method == "engine-heuristic":
         from lookahead.planning.heuristic import HeuristicPlanner
 
@@ -214,7 +240,9 @@ def run_engine(p, method: str) -> dict:
         m = p.config.machine
         segments = p.segments
         t0 = time.perf_counter()
-        engine = Engine(p.config, planner, realtime=False)
+        ahead = AheadRecorder()
+        ahead.dt = m.dt
+        engine = Engine(p.config, planner, realtime=realtime, executor=ahead)
         events: list = []
         for seg in segments:
             events += engine.submit(seg)
@@ -223,6 +251,7 @@ def run_engine(p, method: str) -> dict:
         for batch in engine_batches(engine):
             checker.feed(batch.pos)
             samples += batch.n
+            ahead.k_next = samples
             last_pos = batch.pos[-1]
             final = batch.final
         wall = time.perf_counter() - t0
@@ -241,6 +270,9 @@ def run_engine(p, method: str) -> dict:
         "plans": len(planner.times), "replan_ms_p50": float(np.percentile(plan_ms, 50)),
         "replan_ms_p99": float(np.percentile(plan_ms, 99)),
         "replan_ms_max": float(np.max(plan_ms)),
+        "ahead_plans": len(ahead.rows),
+        "ahead_late": sum(c > a for a, c in ahead.rows),
+        "ahead_min_slack_s": min((a - c for a, c in ahead.rows), default=None),
         "events": [f"{e.type}: {e.extra.get('reason', '')}"[:300] for e in bad][:5],
         "warnings": handler.count, "warning_messages": handler.messages,
         "violations": rep.violations, "peak": rep.peak_fraction,

@@ -77,15 +77,17 @@ def plan(job: Path, method: str) -> dict:
             "peak_rss_mb": peak, "stderr_tail": err.strip().splitlines()[-3:]}
 
 
-def stream(job: Path, method: str) -> dict:
-    """publish -> serve --fast -> winder --fast; the service's peak memory over time."""
+def stream(job: Path, method: str, realtime: bool = False) -> dict:
+    """publish -> serve --fast -> winder --fast (`realtime`: both on the wall clock, the
+    program's whole motion time); the service's peak memory over time."""
+    fast = () if realtime else ("--fast",)
     env = {**os.environ, "LOOKAHEAD_ZENOH_LISTEN": free_tcp_endpoint(),
            "LOOKAHEAD_PLANNER_METHOD": method, "PYTHONUNBUFFERED": "1"}
     env.pop("LOOKAHEAD_ZENOH_CONNECT", None)
     report = Path(tempfile.mkdtemp()) / "report.json"
-    service = lookahead("serve", "--config", "winder3", "--fast", "--log-level", "WARNING",
+    service = lookahead("serve", "--config", "winder3", *fast, "--log-level", "WARNING",
                         env=env)
-    winder = lookahead("winder", "--config", "winder3", "--fast", "--jobs", "1",
+    winder = lookahead("winder", "--config", "winder3", *fast, "--jobs", "1",
                        "--report-json", str(report), env=env)
     time.sleep(3.0)
     t0 = time.perf_counter()
@@ -96,7 +98,7 @@ def stream(job: Path, method: str) -> dict:
         memory.append((round(time.perf_counter() - t0, 1), vm_hwm_mb(service.pid)))
         time.sleep(1.0)
     wall = time.perf_counter() - t0
-    winder.wait(timeout=120)
+    winder.wait(timeout=7200 if realtime else 120)  # real time: the whole motion time
     for p in (service, winder):
         if p.poll() is None:
             p.terminate()
@@ -108,6 +110,7 @@ def stream(job: Path, method: str) -> dict:
             "duration_s": duration, "x_real_time": duration / wall if duration else None,
             "violations": rep.get("violations"), "gaps": rep.get("gaps"),
             "fallbacks": rep.get("fallbacks"), "clean": rep.get("clean"),
+            "underruns": rep.get("underruns"), "max_lateness_s": rep.get("max_lateness_s"),
             "service_peak_rss_mb": max((m for _, m in memory), default=None),
             "service_rss_over_time": memory[:: max(1, len(memory) // 40)],
             "service_warnings": [ln for ln in service_err.splitlines() if "WARNING" in ln][:5]}
@@ -118,21 +121,33 @@ def main() -> int:
     ap.add_argument("--lines", type=int, default=100_000)
     ap.add_argument("--methods", default="heuristic,lp")
     ap.add_argument("--no-stream", action="store_true")
+    ap.add_argument("--no-plan", action="store_true")
+    ap.add_argument("--realtime", action="store_true",
+                    help="also stream in real time (the program's motion time, ~50 min)")
+    ap.add_argument("--update", action="store_true",
+                    help="keep the results file's other entries")
     ap.add_argument("--out", default=str(OUT), help="results file (default: %(default)s)")
     args = ap.parse_args()
     prog = program(args.lines)
     text = gcode(prog)
     job = Path(tempfile.mkdtemp()) / "long.gcode"
     job.write_text(text)
-    result = {"lines": len(text.splitlines()), "program": prog.__dict__, "plan": [],
-              "stream": []}
+    old = json.loads(Path(args.out).read_text()) if args.update else {}
+    result = {"plan": [], "stream": [], "realtime": [], **old,
+              "lines": len(text.splitlines()), "program": prog.__dict__}
     print(f"{result['lines']} lines", file=sys.stderr)
+
+    def put(kind: str, row: dict) -> None:
+        result[kind] = [r for r in result[kind] if r["method"] != row["method"]] + [row]
+        print(json.dumps(row)[:600], file=sys.stderr)
+
     for method in args.methods.split(","):
-        result["plan"].append(plan(job, method))
-        print(json.dumps(result["plan"][-1]), file=sys.stderr)
+        if not args.no_plan:
+            put("plan", plan(job, method))
         if not args.no_stream:
-            result["stream"].append(stream(job, method))
-            print(json.dumps(result["stream"][-1])[:600], file=sys.stderr)
+            put("stream", stream(job, method))
+        if args.realtime:
+            put("realtime", stream(job, method, realtime=True))
     Path(args.out).write_text(json.dumps(result, indent=1))
     return 0
 

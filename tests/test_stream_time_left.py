@@ -121,15 +121,17 @@ def predicted_ends(pairs: list[tuple[int, Status]], dt: float) -> list[tuple[int
 @pytest.mark.parametrize(("planner", "realtime"), [("heuristic", False), ("lp", True)])
 def test_override_hold_and_resume_are_recomputed_and_holds_not_counted(cfg, planner,
                                                                         realtime):
-    """A job planned to its end from ~0.7 s on; commands before calls 100 (override 0.6:
-    slower), 160 (hold), 300 (resume) and 360 (override 1.0: faster again): false/None
-    from each command until the plan is remade, then one predicted end until the next
-    command, the true end after the last. Real time: the hold's rest samples count as job
-    time once they are published, never before."""
+    """A job planned to its end from ~0.8 s on (real time ~1.6 s: replans take over ahead
+    of the last sample); commands before calls 100 (real time 180; override 0.6: slower),
+    160 (220; hold), 300 (resume) and 360 (override 1.0: faster again): false/None from
+    each command until the plan is remade, then one predicted end until the next command,
+    the true end after the last. Real time: the hold's rest samples count as job time once
+    they are published, never before."""
     engine = Engine(cfg, make_planner(planner), realtime=realtime)
     for seg in segments("cmds", long_points(300, strokes=1)):
         engine.submit(seg)
-    script = {100: [Command("override", 0.6)], 160: [Command("hold")],
+    first, hold = (180, 220) if realtime else (100, 160)
+    script = {first: [Command("override", 0.6)], hold: [Command("hold")],
               300: [Command("resume")], 360: [Command("override", 1.0)]}
     batches, pairs = run(engine, script)
     dt = cfg.machine.dt

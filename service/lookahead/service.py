@@ -25,6 +25,7 @@ import math
 import queue
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -116,8 +117,12 @@ class PlannerService:
         self.config = config
         self.fast = fast
         self.ns = config.ns
+        # real-time mode: replans are computed in a worker thread while the plan in force
+        # keeps producing samples (stream/ahead.py); fast mode computes them at once
+        self._planning = (None if fast else
+                          ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner"))
         self.engine = Engine(config, planner or make_planner(config.planner.method),
-                             realtime=not fast)
+                             realtime=not fast, executor=self._planning)
         self.pacer = Pacer(config.machine.dt, config.service.lead_s)
         self.stats = ServiceStats()
         self._incoming: queue.Queue[bytes] = queue.Queue()
@@ -171,6 +176,8 @@ class PlannerService:
         for thread in (self._drain_thread, self._pace_thread):
             if thread is not None:
                 thread.join(timeout=2.0)
+        if self._planning is not None:
+            self._planning.shutdown(wait=False, cancel_futures=True)
         if self._session is None:
             return
         for decl in [*self._decls, self._sub, self._token]:

@@ -84,16 +84,23 @@ from __future__ import annotations
 import logging
 import math
 from collections import OrderedDict
+from concurrent.futures import Executor, Future, wait
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from lookahead.config import Config
 from lookahead.limits import AxisLimits
-from lookahead.planning.base import PathState, Planner, PlanningError, PlanRequest
+from lookahead.planning.base import PathState, Planner, PlanRequest
 from lookahead.planning.heuristic import HeuristicPlanner  # at start-up, not per job
-from lookahead.planning.place import describe_place, failure_s
 from lookahead.protocol import Command, CommandReply, Event, Segment, SetpointBatch, Status
+from lookahead.stream.ahead import (
+    InlineExecutor,
+    PendingPlan,
+    PlanOutcome,
+    ahead_samples,
+    plan_with_fallback,
+)
 from lookahead.stream.assembler import (
     JobGeometry,
     SegmentOrder,
@@ -103,7 +110,6 @@ from lookahead.stream.assembler import (
 from lookahead.stream.plans import (
     S_TOL,
     CommittedPlan,
-    plan_checked,
     rest_plan,
     shortest_stop,
 )
@@ -170,20 +176,32 @@ class _Job:
     ends_job: tuple[CommittedPlan, bool] | None = None
     #: (final_length, tolerance) once the geometry is finished (`Engine._finished_end`)
     end_memo: tuple[float, float] | None = None
+    #: real-time mode: the replan under way, which takes over at its `k_at` (stream/ahead.py)
+    pending: PendingPlan | None = None
 
 
 class Engine:
     """Segments -> look-ahead plans -> setpoint batches; see the module docstring."""
 
     def __init__(self, config: Config, planner: Planner, realtime: bool = False,
-                 stop_planner: Planner | None = None) -> None:
+                 stop_planner: Planner | None = None, executor: Executor | None = None
+                 ) -> None:
         m = config.machine
         self.config = config
         self.planner = planner
         search_planner = stop_planner
+        #: the fallback of replans computed ahead: planners are not thread-safe, so a
+        #: worker never shares one with the stops that the engine plans meanwhile
+        self._ahead_fallback = stop_planner
         if stop_planner is None:
             stop_planner = HeuristicPlanner(margin=1.0)
             search_planner = HeuristicPlanner(margin=1.0, brake_within_limits=False)
+            self._ahead_fallback = HeuristicPlanner(margin=1.0) if realtime else stop_planner
+        assert self._ahead_fallback is not None
+        #: runs the replans computed ahead (real-time mode); the service passes a worker
+        #: thread, anything else computes them at once, with the same results
+        self.executor = executor or InlineExecutor()
+        self._inflight: Future | None = None  # the last replan handed to the executor
         self.stop_planner = stop_planner
         #: the shortest-stop search's first try (fast-failing trials, `_begin_stop`)
         self.stop_search_planner = search_planner
@@ -374,10 +392,13 @@ class Engine:
         return batch
 
     def _produce(self, job: _Job) -> SetpointBatch | None:
+        self._take_over(job)
         self._maybe_replan(job)
         plan = job.plan
         assert plan is not None
         k0, n = job.k, self.batch
+        if job.pending is not None:  # the plan in force produces up to k_at
+            n = min(n, job.pending.k_at + 1 - k0)
         final = False
         if self._ending(job):
             n = max(1, min(n, plan.k_end - k0 + 1))
@@ -462,43 +483,68 @@ class Engine:
                            job.geo.feed_cap(self.override), self.dt)
 
     def _commit(self, job: _Job, start: PathState, s_end: float, k_plan: int) -> bool:
-        """Plan [start.s, s_end] anchored at k_plan; keep the old plan if it fails."""
+        """Plan [start.s, s_end] anchored at k_plan now; keep the old plan if it fails."""
+        self._planner_free()
         request = self._request(job, start, s_end)
-        try:
-            plan = self._plan_with_fallback(request, k_plan, job.tail, job.plan)
-        except (PlanningError, ValueError, RuntimeError, ArithmeticError) as exc:
+        outcome = plan_with_fallback(self.planner, self.stop_planner, request, k_plan,
+                                     job.tail, self.limits, job.plan)
+        return self._adopt(job, outcome, start, s_end, k_plan, job.geo.final_length)
+
+    def _adopt(self, job: _Job, outcome: PlanOutcome, start: PathState, s_end: float,
+               k_plan: int, final: float) -> bool:
+        """Put a replan's outcome in force (or count its failure: the old plan stays);
+        `final`: the job's final length the replan saw."""
+        if outcome.fell_back:
+            self.fallbacks += 1
+        if outcome.plan is None:
             self.replan_failures += 1
             job.last_fail = k_plan
             log.log(logging.DEBUG if job.stop == "override" else logging.WARNING,
                     "replan failed job=%s k=%d s=%.6g..%.6g: %s", job.id, k_plan,
-                        start.s, s_end, exc)
+                    start.s, s_end, outcome.error)
             return False
-        job.plan = plan
-        job.planned_final = job.geo.final_length
+        job.plan = outcome.plan
+        job.planned_final = final
         job.force_replan = False
         self.replans += 1
-        self.plan_ms = plan.compute_s * 1e3
+        self.plan_ms = outcome.plan.compute_s * 1e3
         return True
 
-    def _plan_with_fallback(self, request: PlanRequest, k_plan: int, tail: np.ndarray,
-                            previous: CommittedPlan | None = None) -> CommittedPlan:
-        """The configured planner's checked plan, else the stop planner's (same request);
-        `previous` (the plan in force) lends its verified samples where a plan equals it."""
-        try:
-            return plan_checked(self.planner, request, k_plan, tail, self.limits, previous)
-        except (PlanningError, ValueError, RuntimeError, ArithmeticError) as exc:
-            if self.stop_planner is self.planner:
-                raise
-            # a fallback is a failure of the configured planner (issue 13): counted in
-            # status and job_finished, logged with the reason and the place on the path
-            s_fail = failure_s(exc, request.start.s)
-            log.warning("%s failed (fallback to %s) at k=%d, %s, window s=%.6g..%.6g from "
-                        "v=%.6g a=%.6g: %s", self.planner.name, self.stop_planner.name,
-                        k_plan, describe_place(request.path, s_fail), request.start.s,
-                        request.s_end, request.start.v, request.start.a, exc)
-        plan = plan_checked(self.stop_planner, request, k_plan, tail, self.limits, previous)
-        self.fallbacks += 1
-        return plan
+    def _replan(self, job: _Job, plan: CommittedPlan, k_last: int, state: PathState,
+                target: float) -> None:
+        """A replan on time or on new geometry: in real-time mode computed ahead (it takes
+        over `ahead_samples` later, from the plan in force's state there), else now."""
+        ahead = ahead_samples(k_last, plan.k_end, self.batch, self.dt) if self.realtime else 0
+        if ahead <= 0:
+            if self._commit(job, state, target, k_last):
+                job.starved = False
+            return
+        k_at = k_last + ahead
+        start = plan.state(k_at, self.dt)
+        s_end = min(job.geo.final_length, start.s + self.horizon_len)
+        request = self._request(job, start, s_end)
+        tail = plan.samples(k_at - 2, 3, self.dt).pos
+        future = self.executor.submit(plan_with_fallback, self.planner, self._ahead_fallback,
+                                      request, k_at, tail, self.limits, plan)
+        self._inflight = future
+        job.pending = PendingPlan(k_at, start, s_end, job.geo.final_length, future)
+
+    def _take_over(self, job: _Job) -> None:
+        """The replan under way takes over once its sample k_at is produced (waiting for
+        it if it is not done)."""
+        pending = job.pending
+        if pending is None or job.k <= pending.k_at:
+            return
+        job.pending = None
+        if self._adopt(job, pending.future.result(), pending.start, pending.s_end,
+                       pending.k_at, pending.final):
+            job.starved = False
+
+    def _planner_free(self) -> None:
+        """Wait until no replan under way uses the planners (they are not thread-safe)."""
+        if self._inflight is not None:
+            wait([self._inflight])
+            self._inflight = None
 
     def _maybe_replan(self, job: _Job) -> None:
         geo = job.geo
@@ -514,6 +560,8 @@ class Engine:
             return
         if job.stop in ("abort", "fault") or job.hold:
             return
+        if job.override_pending or job.stop == "override":
+            job.pending = None  # planned at the old override
         if job.stop == "override":
             if at_rest:
                 job.stop = None
@@ -533,6 +581,8 @@ class Engine:
                 self._begin_stop(job, "override")
                 job.last_try = k_last
             return
+        if job.pending is not None:
+            return  # a replan is under way: it takes over at its k_at
         # the two common cases of every batch, decided without building the geometry
         # (which new segments make stale) and without the path state: they return where
         # the checks below would return too
@@ -567,9 +617,8 @@ class Engine:
         due = at_rest or job.force_replan or since >= self._every
         if k_last - job.last_fail < self._min_gap and not at_rest:
             return  # a replan just failed: the plan in force stays (it ends at rest)
-        if (due or (changed and since >= self._min_gap)) and self._commit(job, state, target,
-                                                                           k_last):
-            job.starved = False
+        if due or (changed and since >= self._min_gap):
+            self._replan(job, plan, k_last, state, target)
 
     def _first_plan(self, job: _Job) -> None:
         path = job.geo.path()
@@ -585,6 +634,9 @@ class Engine:
         published sample); the current plan, which ends at rest, is the fallback."""
         plan = job.plan
         assert plan is not None
+        job.pending = None  # a stop replaces the replan under way too
+        if self._ahead_fallback in (self.stop_planner, self.stop_search_planner):
+            self._planner_free()
         job.stop = kind
         if kind == "hold":
             job.hold = True
@@ -722,7 +774,7 @@ class Engine:
     def _plan_complete(self, job: _Job) -> bool:
         """The committed plan runs to the end of the job and no command waits to change it
         (module docstring, "Time left")."""
-        if job.plan is None or job.stop_request is not None:
+        if job.plan is None or job.stop_request is not None or job.pending is not None:
             return False
         if job.stop in ("abort", "fault"):
             return True
@@ -800,7 +852,8 @@ class Engine:
 
     def _forget_plans(self) -> None:
         """Tell planners that keep their last plan (the LP's seams) that it is void."""
-        for planner in (self.planner, self.stop_planner):
+        self._planner_free()
+        for planner in (self.planner, self.stop_planner, self._ahead_fallback):
             forget = getattr(planner, "forget", None)
             if callable(forget):
                 forget()

@@ -1,0 +1,118 @@
+"""Replans computed ahead of time (real-time mode).
+
+A replan of the plan in force does not start at the last produced sample but at a sample
+`k_at` ahead of it, on the plan in force: the service computes it in a worker thread while
+the plan in force keeps producing samples up to `k_at`, where the new plan takes over. What
+is planned and where it takes over depend only on the engine's inputs, never on how long the
+computation took: an engine that computes at once (`InlineExecutor`: fast mode, replays,
+tests) produces the same batches as one with a worker thread. Only when the worker has not
+finished by the time sample `k_at` is due does the engine wait for it (as every replan did
+before: on the 100k-line winding program the LP's replans took up to 3.3 s on a quiet
+2-core machine, and the real-time buffer held at most 1.05 s).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from concurrent.futures import Executor, Future
+from dataclasses import dataclass
+
+import numpy as np
+
+from lookahead.limits import AxisLimits
+from lookahead.planning.base import PathState, Planner, PlanningError, PlanRequest
+from lookahead.planning.place import describe_place, failure_s
+from lookahead.stream.plans import CommittedPlan, plan_checked
+
+log = logging.getLogger("lookahead.engine")
+
+#: a moving replan takes over at most this far (s of motion) ahead of the last produced
+#: sample ... It trades how soon new geometry or a longer window is used for how long a
+#: computation may take without holding up the samples: the LP's replans on the 100k-line
+#: winding program (bench/long_program.py, winder3) took up to 3.3 s on a quiet 2-core
+#: machine, with 63 s of motion left in the plan in force; on the fast corpus the longest
+#: replan was 1.25 s (engine-lp, n-butterfly)
+PLAN_AHEAD_MAX_S = 5.0
+#: ... and at most this share of the motion the plan in force has left (a plan in force
+#: looks ahead >= 2 braking distances when a replan comes, so a third of its time keeps
+#: the take-over before its braking starts)
+PLAN_AHEAD_SHARE = 1.0 / 3.0
+#: a restart from rest (new geometry after a stop at the end of what was received, a
+#: resume) takes over this far ahead: the machine waits this long at rest, but its rest
+#: samples keep coming while the plan is computed
+RESTART_AHEAD_S = 0.5
+
+PLANNING_ERRORS = (PlanningError, ValueError, RuntimeError, ArithmeticError)
+
+
+class InlineExecutor(Executor):
+    """An Executor that runs each call at once in the caller's thread (fast mode, replays,
+    tests): the engine's results are the same as with a worker thread."""
+
+    def submit(self, fn: Callable, /, *args, **kwargs) -> Future:  # type: ignore[override]
+        future: Future = Future()
+        try:
+            future.set_result(fn(*args, **kwargs))
+        except BaseException as exc:  # handed to whoever asks for the result
+            future.set_exception(exc)
+        return future
+
+
+@dataclass(frozen=True)
+class PlanOutcome:
+    """A checked plan (None if none: `error` says why); `fell_back`: it is the stop
+    planner's, the configured planner failed."""
+
+    plan: CommittedPlan | None
+    error: Exception | None = None
+    fell_back: bool = False
+
+
+def plan_with_fallback(planner: Planner, fallback: Planner, request: PlanRequest, k_plan: int,
+                       tail: np.ndarray, check_limits: AxisLimits,
+                       previous: CommittedPlan | None = None) -> PlanOutcome:
+    """The configured planner's checked plan, else the fallback's (same request); never
+    raises for a planning failure. `previous` (the plan in force) lends its verified
+    samples where a plan equals it."""
+    try:
+        return PlanOutcome(plan_checked(planner, request, k_plan, tail, check_limits,
+                                        previous))
+    except PLANNING_ERRORS as exc:
+        if fallback is planner:
+            return PlanOutcome(None, exc)
+        # a fallback is a failure of the configured planner (issue 13): counted in
+        # status and job_finished, logged with the reason and the place on the path
+        s_fail = failure_s(exc, request.start.s)
+        log.warning("%s failed (fallback to %s) at k=%d, %s, window s=%.6g..%.6g from "
+                    "v=%.6g a=%.6g: %s", planner.name, fallback.name, k_plan,
+                    describe_place(request.path, s_fail), request.start.s, request.s_end,
+                    request.start.v, request.start.a, exc)
+    try:
+        return PlanOutcome(plan_checked(fallback, request, k_plan, tail, check_limits,
+                                        previous), fell_back=True)
+    except PLANNING_ERRORS as exc:
+        return PlanOutcome(None, exc)
+
+
+def ahead_samples(k_last: int, k_end: int, batch: int, dt: float) -> int:
+    """How many samples after the last produced one (`k_last`) a replan of a plan in force
+    that comes to rest at `k_end` takes over: a whole number of batches (so that batches
+    keep their size), 0 if less than one (then it is planned at once)."""
+    left = k_end - k_last
+    limit_s = RESTART_AHEAD_S if left <= 0 else min(PLAN_AHEAD_MAX_S,
+                                                     PLAN_AHEAD_SHARE * left * dt)
+    return (int(limit_s / dt + 1e-9) // batch) * batch
+
+
+@dataclass(frozen=True)
+class PendingPlan:
+    """A replan under way: it takes over at sample `k_at` (its profile time 0), from
+    `start` (the plan in force's state there) to `s_end`; `final`: the job's final length
+    when it was asked for."""
+
+    k_at: int
+    start: PathState
+    s_end: float
+    final: float
+    future: Future

@@ -1,0 +1,154 @@
+"""Replans computed ahead in real-time mode (stream/ahead.py): the plan in force keeps
+producing samples while a worker computes the next plan, which takes over at a sample
+chosen from the engine's inputs alone, so a worker thread and an inline computation give
+the same batches."""
+
+from __future__ import annotations
+
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import pytest
+
+from lookahead.checker import LimitChecker
+from lookahead.config import default_config
+from lookahead.planning.base import PlanRequest, PlanResult
+from lookahead.protocol import Command, Segment, SetpointBatch
+from lookahead.stream.ahead import PLAN_AHEAD_MAX_S, RESTART_AHEAD_S, ahead_samples
+from lookahead.stream.engine import Engine
+from lookahead.stream.planners import make_planner
+
+AXES = ("X", "C")
+#: a test that waits this long for the engine has found a deadlock (never reached when
+#: the engine works: nothing below waits on the clock otherwise)
+DEADLOCK_S = 60.0
+
+
+def job_segments(job: str = "ahead", strokes: int = 3, n: int = 900) -> list[Segment]:
+    """`strokes` 300 mm X strokes, C turning 5 turns per stroke: several windows long."""
+    t = np.linspace(0.0, 1.0, n)
+    pts = np.column_stack([150.0 * (1.0 - np.cos(2.0 * strokes * np.pi * t)),
+                           1800.0 * strokes * t])
+    chunks = [pts[i:i + 101] for i in range(0, n - 1, 100)]
+    return [Segment(job, i, AXES, "points", i == len(chunks) - 1, points=c)
+            for i, c in enumerate(chunks)]
+
+
+class GatedPlanner:
+    """A planner whose calls after the first wait until the test opens `gate`."""
+
+    def __init__(self, method: str) -> None:
+        self.inner = make_planner(method)
+        self.name = self.inner.name
+        self.calls = 0
+        self.entered = threading.Event()  # a gated call has started
+        self.gate = threading.Event()
+
+    def plan(self, request: PlanRequest) -> PlanResult:
+        self.calls += 1
+        if self.calls > 1:
+            self.entered.set()
+            assert self.gate.wait(DEADLOCK_S), "the test never opened the gate"
+        return self.inner.plan(request)
+
+
+def run_to_end(engine: Engine, limit: int = 100000) -> list[SetpointBatch]:
+    out: list[SetpointBatch] = []
+    for _ in range(limit):
+        batch = engine.next_batch()
+        if batch is not None:
+            out.append(batch)
+            if batch.final:
+                return out
+    raise AssertionError("the job did not finish")
+
+
+def checked(cfg, batches: list[SetpointBatch]) -> np.ndarray:
+    """All positions, after asserting contiguous samples and no limit violation."""
+    ks = np.concatenate([b.k0 + np.arange(b.n) for b in batches])
+    assert np.array_equal(ks, np.arange(ks.size))
+    pos = np.vstack([b.pos for b in batches])
+    checker = LimitChecker(cfg.machine.limits, cfg.machine.dt)
+    checker.feed(pos)
+    assert checker.report().violations == 0
+    return pos
+
+
+def test_ahead_samples_are_whole_batches_within_the_shares() -> None:
+    dt, batch = 0.001, 10
+    assert ahead_samples(100, 100 + 60_000, batch, dt) == round(PLAN_AHEAD_MAX_S / dt)
+    assert ahead_samples(100, 100 + 3000, batch, dt) == 1000  # a third of what is left
+    assert ahead_samples(100, 100 + 3001, batch, dt) == 1000  # whole batches only
+    assert ahead_samples(100, 100 + 29, batch, dt) == 0  # under a batch: plan now
+    assert ahead_samples(100, 90, batch, dt) == round(RESTART_AHEAD_S / dt)  # at rest
+
+
+@pytest.mark.parametrize("method", ["heuristic", "lp"])
+def test_a_worker_thread_gives_the_batches_of_an_inline_engine(method: str) -> None:
+    """The same job through a real-time engine computing replans at once and through one
+    with a worker thread: bit-identical samples, several replans taken over ahead."""
+    cfg = default_config()
+    runs = []
+    for executor in (None, ThreadPoolExecutor(max_workers=1)):
+        engine = Engine(cfg, make_planner(method), realtime=True, executor=executor)
+        for seg in job_segments():
+            engine.submit(seg)
+        runs.append((run_to_end(engine), engine.replans, engine.fallbacks))
+        if executor is not None:
+            executor.shutdown()
+    (inline, replans, fallbacks), (threaded, replans_t, fallbacks_t) = runs
+    assert replans == replans_t >= 3 and fallbacks == fallbacks_t == 0
+    assert np.array_equal(checked(cfg, inline), checked(cfg, threaded))
+
+
+def test_samples_keep_coming_while_a_replan_is_computed() -> None:
+    """While the worker's replan is blocked, the plan in force keeps producing batches (in
+    fast mode the first batch after the replan's start would wait for it)."""
+    cfg = default_config()
+    planner = GatedPlanner("heuristic")
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        engine = Engine(cfg, planner, realtime=True, executor=pool)
+        for seg in job_segments():
+            engine.submit(seg)
+        batches = []
+        while not planner.entered.is_set():
+            batch = engine.next_batch()
+            assert batch is not None and not batch.final
+            batches.append(batch)
+        k_asked = batches[-1].k0 + batches[-1].n - 1
+        for _ in range(30):  # 0.3 s of samples (it takes over ~0.4 s ahead), still blocked
+            batches.append(engine.next_batch())
+        assert not planner.gate.is_set()
+        assert batches[-1].k0 + batches[-1].n - 1 == k_asked + 300
+        planner.gate.set()
+        batches += run_to_end(engine)
+    assert engine.replans >= 2 and engine.fallbacks == 0 and engine.replan_failures == 0
+    checked(cfg, batches)
+
+
+def test_a_hold_during_a_replan_under_way_stops_without_waiting_for_it() -> None:
+    """A hold while the worker's replan is blocked: the stop is planned and produced at
+    once (the worker's fallback is not the stop planner), the machine comes to rest; after
+    the gate opens and a resume, the job runs to its end within the limits."""
+    cfg = default_config()
+    planner = GatedPlanner("heuristic")
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        engine = Engine(cfg, planner, realtime=True, executor=pool)
+        for seg in job_segments():
+            engine.submit(seg)
+        batches = []
+        while not planner.entered.is_set():
+            batches.append(engine.next_batch())
+        assert engine.command(Command("hold")).ok
+        for _ in range(300):  # 3 s: the stop from full feed takes well under that
+            batches.append(engine.next_batch())
+        assert not planner.gate.is_set()
+        assert engine.status().state == "holding"
+        rest = np.vstack([b.pos for b in batches[-10:]])
+        assert np.all(rest == rest[0])  # at rest, the replan still blocked
+        planner.gate.set()
+        assert engine.command(Command("resume")).ok
+        batches += run_to_end(engine)
+    assert engine.fallbacks == 0 and engine.replan_failures == 0
+    checked(cfg, batches)
