@@ -6,8 +6,10 @@ commands and asks for batches when they are due; a replay does the same from a r
 
 API (stable; the replay client depends on it):
 
-- `Engine(config, planner, realtime=False)`; `planner` implements `Planner` and plans to
-  the limits it is given (the engine applies `config.planner.margin` and the override).
+- `Engine(config, planner, realtime=False, stop_planner=None, executor=None)`; `planner`
+  implements `Planner` and plans to the limits it is given (the engine applies
+  `config.planner.margin` and the override); `executor` (a concurrent.futures Executor,
+  default inline) computes real-time replans ahead; the batches do not depend on it.
 - `submit(segment, now_s=None) -> list[Event]`: take in a decoded segment. Segments are
   recorded and listed in the next batch's `applied` field (the sample index k0 at which
   they were taken in). `now_s` (any monotonic clock, seconds) only times seq gaps.
@@ -33,7 +35,10 @@ the commands of its `commands` list, interleaved as their `after` counts say, th
 `next_batch()` until it returns a batch; the batches are bit-identical to the recording.
 
 Planning (DESIGN.md "Look-ahead window"): every plan starts in the state of the last
-published sample (s, ds/dt, d2s/dt2 continuous) and ends at rest inside final geometry, at
+published sample (s, ds/dt, d2s/dt2 continuous; in real-time mode a replan on time or on new
+geometry starts instead on the plan in force, `stream.ahead.ahead_samples` later, and takes
+over there: the `executor`, the service's worker thread, computes it meanwhile; commands
+and a job's first plan are planned at once) and ends at rest inside final geometry, at
 min(final length, s + horizon); every plan is checked with the finite-difference checker
 against the published tail before it is committed. If the configured planner fails, the
 stop planner (heuristic) gets the same request (`fallbacks` counts these); if both fail,
