@@ -648,3 +648,33 @@ def test_release_ends_at_rest_acceleration_within_the_jerk_limits(tube):
     for v0, a0 in ((1.5e-171, -8e-194), (500.0, -8e-194)):
         assert start_release(tube, limits, PathState(900.0, v0, a0), h, 1000.0,
                              MACHINE.dt) is None
+
+
+def stroke_with_turns():
+    """A 300 mm X stroke there and back while C turns 5 turns (default machine, 300
+    points, cubic fit): `tests/test_stream_time_left.py`'s one-stroke job."""
+    t = np.linspace(0.0, 1.0, 300)
+    pts = np.column_stack([150.0 * (1.0 - np.cos(2.0 * np.pi * t)), 1800.0 * t])
+    return fit_points(pts, MACHINE.path_scale)
+
+
+@pytest.mark.xfail(strict=True, reason="known LP failure (open, issue 13): 'sampled profile "
+                   "still exceeds the jerk limit by 1957.5 % after 2 repairs (stuck there)'")
+def test_a_start_accelerating_hard_near_the_job_end_plans():
+    """Found in real-time mode (stop 25) when an override's replan was first planned by the
+    heuristic and the LP took over from its plan: from s = 2790.15 at 1087.46 mm/s,
+    accelerating at +3813.87 mm/s^2, to rest at the path's end 421 mm on. A state within the
+    limits (the heuristic's plan passed the checker) that the heuristic continues (0.52 s
+    to rest); the LP fails."""
+    from lookahead.planning.base import PlanningError
+
+    path = stroke_with_turns()
+    limits = MACHINE.limits.scaled(default_config().planner.margin)
+    start = PathState(2790.1534550769134, 1087.4558276506175, 3813.8685148444533)
+    req = PlanRequest(path, limits, start, path.length, dt=MACHINE.dt)
+    try:
+        res = LPPlanner().plan(req)
+    except PlanningError as exc:
+        pytest.fail(f"the LP failed: {exc}")
+    rep = played(path, res.profile, MACHINE.limits, MACHINE.dt)
+    assert rep.violations == 0, rep.first
