@@ -538,18 +538,22 @@ def test_dwell_layer_through_the_engine_has_no_fallback(corpus_all_few):
     assert row["violations"] == 0
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "known LP failure (open, issue 13): at the dwell turnaround 124 mm ahead (the v+a "
-    "solution's tip at 41 mm/s) every jerk pass stalls a node at q = 0, `_unstall` cannot "
-    "lift it, and the first pass's infinite time ends the passes: 'the jerk LP has no "
-    "solution'; re-linearizing the stalled passes gave a plan 6000x over the jerk limit. "
-    "The start zone (182 nodes, 560 mm) covers the turnaround, so the elastic LP's slacks "
-    "reach it. With REPAIR_BACKOFF the repairs stay in the hard LP and get stuck at the "
-    "turnaround instead: 'jerk 13.4 % after 4 repairs (stuck there)' at +122..138 mm"))
-def test_dwell_layer_window_braking_into_its_turnaround_plans(corpus_all_few):
+@pytest.mark.parametrize("grid_step", [None, 3.5, 5.0, 6.5])
+def test_dwell_layer_window_braking_into_its_turnaround_plans(corpus_all_few, grid_step):
     """A window of the dwell layer that the engine asked for once HiGHS returned other
     optimal vertices (lazy rows, not landed): braking at -1388 mm/s^2 from 958 mm/s,
-    124 mm before a dwell turnaround. The heuristic plans it (5.95 s); the LP must too."""
+    124 mm before a dwell turnaround's 50 deg tangent corner (passed at ~10 mm/s). The
+    heuristic plans it (5.95 s); the LP now too (5.60 s). Used to fail ("jerk 13.4 %
+    after 4 repairs (stuck there)"): the braking is feasible from ~0.8 x the jerk limit on
+    (its S-curve: 117.6 mm at 0.98), but the LP's first jerk pass, linearized at the v+a
+    solution (which brakes at the last moment at full acceleration, far above any
+    jerk-limited braking), needed 0.91: infeasible at the margins, so the start zone went
+    to factors 1 and planned at the rows' edge, where the quintic overshoots by 1-18 %
+    and every repair made it infeasible again. Now the margins are solved once more with
+    the rows linearized at the relaxed solution (`LPPlanner._remargin`): feasible down
+    to 0.78, and the repairs converge. Grid steps (mm; None: the default, 5.96): of
+    eight from 3 to 6.5 mm only 3 planned before; the 5 mm grid also needs the repairs
+    beyond the start zone to keep their whole tightening (`REPAIR_BACKOFF`)."""
     from lookahead.planning.base import PlanningError
 
     p = corpus_all_few["w-hel-R100-a45-dwell-2mm"]
@@ -558,10 +562,35 @@ def test_dwell_layer_window_braking_into_its_turnaround_plans(corpus_all_few):
     req = PlanRequest(path, m.limits.scaled(p.config.planner.margin), start, path.length,
                       dt=m.dt)
     try:
-        res = LPPlanner().plan(req)
+        res = LPPlanner(grid_step=grid_step).plan(req)
     except PlanningError as exc:
         pytest.fail(f"the LP failed: {exc}")
     rep = played(path, res.profile, m.limits.scaled(1.02), m.dt)
+    assert rep.violations == 0, rep.first
+
+
+def test_cold_replan_braking_past_a_near_cusp_plans():
+    """A cold replan state of bench/replan_continuity.py (--mode cold, seed 1) on
+    c-cycloid-near-cusp-a0p995: 202.6 mm/s braking at -718 mm/s^2, 16 mm before the
+    near-cusp. Used to fail ("jerk 87.7 % after 2 repairs (stuck there)"): the first
+    repair's tightening made the LP infeasible, and backed off everywhere, also at the
+    window's end beyond the start zone, its LP kept 2.37x at the near-cusp, stuck there;
+    with the tightening beyond the zone kept whole (`REPAIR_BACKOFF`) that round's LP
+    leaves 1.17x at the window's end only, and the plan passes after 2 repairs."""
+    from bench.corpus import load_corpus
+
+    from lookahead.stream.engine import horizon_length
+
+    p = load_corpus("fast", pattern="c-cycloid-near-cusp-a0p995")[0]
+    cfg, m = p.config, p.config.machine
+    path = p.path()
+    lim = m.limits.scaled(cfg.planner.margin)
+    window = horizon_length(lim, np.asarray(m.path_scale, float), cfg.planner.horizon_s)
+    start = PathState(143.45745830698945, 202.5986789598816, -718.0774464000748)
+    req = PlanRequest(path, lim, start, min(path.length, start.s + window),
+                      feed_cap=p.geometry().feed_cap(), dt=m.dt)
+    res = LPPlanner().plan(req)
+    rep = played(path, res.profile, m.limits, m.dt)
     assert rep.violations == 0, rep.first
 
 
@@ -658,14 +687,19 @@ def stroke_with_turns():
     return fit_points(pts, MACHINE.path_scale)
 
 
-@pytest.mark.xfail(strict=True, reason="known LP failure (open, issue 13): 'sampled profile "
-                   "still exceeds the jerk limit by 1957.5 % after 2 repairs (stuck there)'")
 def test_a_start_accelerating_hard_near_the_job_end_plans():
     """Found in real-time mode (stop 25) when an override's replan was first planned by the
     heuristic and the LP took over from its plan: from s = 2790.15 at 1087.46 mm/s,
     accelerating at +3813.87 mm/s^2, to rest at the path's end 421 mm on. A state within the
     limits (the heuristic's plan passed the checker) that the heuristic continues (0.52 s
-    to rest); the LP fails."""
+    to rest). The LP failed ("jerk 1957.5 % after 2 repairs (stuck there)", at the end):
+    the braking room of the moving start (`_brake_room`, at the worst tangent of the path:
+    jerk 19600 mm/s^3) lifted q above the end's envelope, and the plan reached rest at
+    -5400 mm/s^2 (18x jmax); capping the room there with the end's envelope alone made
+    the LP infeasible (that envelope, at the same worst tangent, is below the heuristic's
+    own plan: only C moves at the stroke's end, 51300 mm/s^3) and the elastic start gave
+    9x jmax at the start. Now the room is capped by the way into the end at its own
+    tangents (`lp.envelope.local_rest_q`)."""
     from lookahead.planning.base import PlanningError
 
     path = stroke_with_turns()

@@ -29,12 +29,15 @@ acceleration above the limits, over the first grid interval: `_start_acc_allowan
 braking start whose acceleration would reach 0 within one grid step (the braking into a
 plan's end at low feed) is first released in closed form (`lp.release`). If the
 LP is still infeasible, it is relaxed in this order: (1) the start zone (two braking
-distances, `_start_zone`) gets the limits themselves (factors 1); (2) its rows become
-elastic (`lp.elastic`: slacks at a dominating cost, feasible whatever the start, exact
-where the hard LP is feasible). Step (1) is skipped when a repair's tightening made the
+distances, `_start_zone`) gets the limits themselves (factors 1), and where that plans,
+the zone's own factors are solved once more with the jerk rows linearized at the relaxed
+solution (`_remargin`), which is the plan when feasible; (2) its rows become elastic
+(`lp.elastic`: slacks at a dominating cost, feasible whatever the start, exact where the
+hard LP is feasible). Step (1) is skipped when a repair's tightening made the
 LP infeasible: it would undo that repair, and the same excess came back every round;
-such a repair is first tried at fractions of its tightening (REPAIR_BACKOFF), as the
-elastic rows take a repair near the start as slack, and the excess grows.
+such a repair is first tried at fractions of its tightening within the start zone
+(REPAIR_BACKOFF), as the elastic rows take a repair near the start as slack, and the
+excess grows.
 The sampled check judges every result as always. A moving start or seam that still
 fails goes, in this order, to: a smaller kept head of the last plan, a cold plan from
 the start state, then the caller (the engine's stop planner, counted as a fallback).
@@ -60,6 +63,7 @@ from lookahead.planning.lp.elastic import elastic_lp
 from lookahead.planning.lp.envelope import (
     braking_distance,
     braking_q,
+    local_rest_q,
     path_limits,
     reachable_q,
 )
@@ -169,7 +173,12 @@ ZONE_REACH = 2.0
 #: jmax over 8 rounds, tube-1450 starts at 0.49-0.96 of the cap accelerating at 0.59-0.84
 #: of the path acceleration, the seeded fuzz of tests/test_lp_feasibility.py); with
 #: (0.5, 0.25, 0.125) those five starts plan, with (0.75, 0.5, 0.25) three of them fail.
-#: Each fraction tried costs one LP.
+#: Each fraction tried costs one LP. Only the tightening within the start zone
+#: (`_start_zone`) is backed off, where it can conflict with the start state; beyond it
+#: the repair keeps its whole tightening (backed off as well, on the dwell layer's
+#: window with a 5 mm grid the repair of an excess 1569 mm beyond the start got 1/8 of
+#: its cut, as did the three rounds after it, and the plan failed after 8 repairs; now
+#: it plans after 5, `test_dwell_layer_window_braking_into_its_turnaround_plans`).
 REPAIR_BACKOFF = (0.5, 0.25, 0.125)
 #: a repair cuts the velocity factor by at least this (acceleration and jerk: 0.97): a
 #: velocity excess is the quintic rising ~1e-5 above a node's cap between nodes, and
@@ -601,13 +610,15 @@ class LPPlanner:
             except PlanningError:
                 if not can_relax or self._elastic:
                     raise
-            if before is not None:  # a repair: fractions of its tightening (REPAIR_BACKOFF)
+            if before is not None:  # a repair: fractions of its tightening in the start
+                # zone (REPAIR_BACKOFF), the whole of it beyond
                 full = (tight.vel.copy(), tight.acc.copy(), tight.jerk.copy())
+                zone = self._start_zone(request, geo)
                 for w in REPAIR_BACKOFF:
                     for mine, old, new in zip((tight.vel, tight.acc, tight.jerk),
                                               (before.vel, before.acc, before.jerk), full,
                                               strict=True):
-                        mine[:] = old * (new / old) ** w
+                        mine[:zone] = old[:zone] * (new[:zone] / old[:zone]) ** w
                     try:
                         return self.solve_grid(request, geo, tight, stop_idx, head,
                                                start_envelope=True, **kw)
@@ -616,23 +627,29 @@ class LPPlanner:
                 tight.vel[:], tight.acc[:], tight.jerk[:] = full
             # relaxation, in this order (module docstring): (1) the start zone gets the
             # limits themselves (factors 1): the start state may come from a plan at the
-            # full limits (the heuristic's); (2) its rows become elastic (`lp.elastic`),
-            # a feasible LP whatever the start. (Dropping the jerk-change rows over the
-            # zone as well let the nodal jerk zig-zag: 3x jmax between the nodes.)
+            # full limits (the heuristic's), or the v+a linearization point lies too far
+            # above a jerk-limited braking (`_remargin`); (2) its rows become elastic
+            # (`lp.elastic`), a feasible LP whatever the start. (Dropping the jerk-change
+            # rows over the zone as well let the nodal jerk zig-zag: 3x jmax between the
+            # nodes.)
             zone = self._start_zone(request, geo)
             # not after a repair: factors 1 would undo the repair's tightening there
             # (measured: a replan from an accelerating start on tube-1450, its repairs
             # going round at +30 % jerk until the plan gave up; the elastic rows keep it)
             if not self._relaxed and before is None:
                 self._relaxed = zone
+                margins = (tight.acc[:zone].copy(), tight.jerk[:zone].copy())
                 tight.acc[:zone] = 1.0
                 tight.jerk[:zone] = 1.0
                 try:
-                    return self.solve_grid(request, geo, tight, stop_idx, head,
-                                           start_envelope=True, **kw)
+                    relaxed = self.solve_grid(request, geo, tight, stop_idx, head,
+                                              start_envelope=True, **kw)
                 except PlanningError:
                     if not self._use_elastic:
                         raise
+                else:
+                    return self._remargin(request, geo, tight, stop_idx, head, relaxed,
+                                          zone, margins)
             if not self._use_elastic:
                 raise PlanningError("lp: the LP from the moving start is infeasible")
             self._elastic = zone
@@ -839,7 +856,10 @@ class LPPlanner:
                           self._envelope(request, geo, tight, stop_idx,
                                          include_start=start_envelope))
         if start_envelope and fixed_head is None and request.start.v > REST:
-            q_hi = np.maximum(q_hi, self._brake_room(request, geo, tight))
+            # the braking room lifts the caps and the envelopes (`_rest_caps`: how far)
+            room = self._brake_room(request, geo, tight)
+            q_hi = np.minimum(np.maximum(q_hi, room),
+                              self._rest_caps(request, geo, tight, stop_idx, room))
         q_lo = np.zeros_like(q_hi)
         fixed = {0: request.start.v**2, geo.n_nodes - 1: request.v_end**2}
         fixed.update({int(i): 0.0 for i in stop_idx})
@@ -1007,6 +1027,35 @@ class LPPlanner:
                                       float(plan.s[0]))
         return out.q[:n]
 
+    def _remargin(self, request: PlanRequest, geo: GridGeometry, tight: Tightening,
+                  stop_idx: np.ndarray, head: np.ndarray | None, relaxed: GridPlan,
+                  zone: int, margins: tuple[np.ndarray, np.ndarray]) -> GridPlan:
+        """After the start zone's relaxation to the limits planned (`relaxed`): the LP at
+        the zone's own factors (`margins`: acceleration, jerk) again, its jerk rows
+        linearized at the relaxed solution; that plan if feasible (`tight` back at the
+        margins), else `relaxed` (`tight` at the limits in the zone).
+
+        Why: a moving start can be infeasible at the margins merely because of where the
+        first jerk pass is linearized. The v+a solution brakes at the last moment at full
+        acceleration, far above any jerk-limited braking, and the tangent rows there are
+        conservative by the gap (q = q*/4: 0.69 of J / sqrt(q)). Measured on the dwell
+        layer's window from 958 mm/s at -1388 mm/s^2, 124 mm before a tangent corner
+        passed at ~10 mm/s (`test_dwell_layer_window_braking_into_its_turnaround_plans`):
+        its S-curve gets there from ~0.8 x the jerk limit on, the LP's jerk factor in the
+        zone had to be >= 0.91-0.94 linearized at the v+a solution (acceleration factor
+        1-0.98; infeasible at the margin 0.85), >= 0.78-0.80 at the relaxed solution.
+        Kept at the limits, the zone planned at the rows' edge, where the quintic
+        exceeded the limits by 1-18 % and every repair made the LP infeasible again (it
+        failed)."""
+        relaxed_factors = (tight.acc[:zone].copy(), tight.jerk[:zone].copy())
+        tight.acc[:zone], tight.jerk[:zone] = margins
+        try:
+            return self.solve_grid(request, geo, tight, stop_idx, head, start_q=relaxed.q,
+                                   passes=self.max_passes, start_envelope=True)
+        except PlanningError:
+            tight.acc[:zone], tight.jerk[:zone] = relaxed_factors
+            return relaxed
+
     @property
     def _use_elastic(self) -> bool:
         """The elastic relaxation is on, and the solver an LP solver: OSQP's proximal QP
@@ -1062,6 +1111,33 @@ class LPPlanner:
         for i in stop_idx:
             env = np.minimum(env, reachable_q(np.abs(s - s[i]), 0.0, 0.0, *factors(s[i])))
         return env
+
+    def _rest_caps(self, request: PlanRequest, geo: GridGeometry, tight: Tightening,
+                   stop_idx: np.ndarray, room: np.ndarray) -> np.ndarray:
+        """What the braking `room` of a moving start (`_brake_room`) may not exceed (q per
+        node): nothing where the room's braking comes to rest within the window (it is
+        a way down), else the S-curve bounds on q into the rests (the end if at rest, the
+        stops) at the tangents on the way (`lp.envelope.local_rest_q`), never below the
+        start's hardest braking at the limits along its tangent (`start_limits`).
+
+        Why: a start accelerating hard 421 mm before the end (1087 mm/s, +3814 mm/s^2)
+        cannot stop within the window at the room's jerk; the room then lifted q above
+        the end's envelope up to the last node and the plan reached rest at -5400 mm/s^2
+        (18x jmax). Capped by the end's envelope of `_envelope` (the worst tangent of the
+        path: 19600 mm/s^3; only C moves at the stroke's end: 51300) the LP was infeasible
+        and the elastic start gave 9x jmax at the start. Capped where the room's braking
+        reaches rest anyway, a start 0.07 mm before its end failed its repairs."""
+        s = geo.s
+        caps = np.full(s.size, np.inf)
+        if room[-1] <= 0.0:
+            return caps
+        centres = [*(() if request.v_end > 0.0 else (s[-1],)), *s[stop_idx]]
+        for centre in centres:
+            caps = np.minimum(caps, local_rest_q(s, centre, geo.d1, request.limits,
+                                                 self.envelope_jerk * tight.jerk, tight.acc))
+        st = request.start
+        A, J = start_limits(geo, request.limits)
+        return np.maximum(caps, braking_q(s - s[0], st.v, st.a, J, max(A, -st.a)))
 
     def _brake_room(self, request: PlanRequest, geo: GridGeometry,
                     tight: Tightening) -> np.ndarray:
