@@ -113,7 +113,8 @@ def stream(job: Path, method: str, realtime: bool = False) -> dict:
             "underruns": rep.get("underruns"), "max_lateness_s": rep.get("max_lateness_s"),
             "service_peak_rss_mb": max((m for _, m in memory), default=None),
             "service_rss_over_time": memory[:: max(1, len(memory) // 40)],
-            "service_warnings": [ln for ln in service_err.splitlines() if "WARNING" in ln][:5]}
+            "service_warning_count": sum("WARNING" in ln for ln in service_err.splitlines()),
+            "service_warnings": [ln for ln in service_err.splitlines() if "WARNING" in ln][:20]}
 
 
 def main() -> int:

@@ -13,7 +13,10 @@ PlanningError or that the engine's own check (`stream.plans.plan_checked`) refus
 (failures first, with the state and the reason) to bench/results/replan_continuity.json.
 
     .venv/bin/python bench/replan_continuity.py [--subset fast|all] [--methods heuristic,lp]
-        [--paths GLOB,...] [--states 40]
+        [--paths GLOB,...] [--states 40] [--mode seamed|cold] [--states-from heuristic]
+
+`--states-from heuristic --methods lp`: the LP replans from states of the heuristic's plan
+(what it meets after a fallback, or taking over from another planner).
 """
 
 from __future__ import annotations
@@ -50,22 +53,26 @@ def states_on(profile, n: int, rng: np.random.Generator) -> list[tuple[float, Pa
     return [(float(ti), profile.state_at(float(ti))) for ti in np.sort(t)]
 
 
-def run_path(p, method: str, n_states: int, seed: int, mode: str = "seamed") -> dict:
+def run_path(p, method: str, n_states: int, seed: int, mode: str = "seamed",
+             source: str | None = None) -> dict:
     """Replans from states of the first window's plan on corpus path p. mode "seamed": the
     planner's last plan is that first plan (as in the engine, whose replans start on the
     plan the planner made last; the LP then continues it at a seam); "cold": a new planner
     per replan (as after a failed replan or a fallback, when the plan in force is not the
-    planner's last)."""
+    planner's last). source: the method that plans the first window (default `method`;
+    another one implies "cold": the states of a fallback's plan)."""
     cfg, m = p.config, p.config.machine
     path = p.path()
     geo = p.geometry()
     lim = m.limits.scaled(cfg.planner.margin)
     window = horizon_length(lim, np.asarray(m.path_scale, float), cfg.planner.horizon_s)
     planner = make_planner(method)
+    if source is not None and source != method:
+        mode = "cold"
     tail = np.empty((0, m.limits.naxes))
     first_request = PlanRequest(path, lim, PathState(0.0), min(path.length, window), 0.0,
                                 geo.feed_cap(), m.dt)
-    first = planner.plan(first_request)
+    first = (planner if source in (None, method) else make_planner(source)).plan(first_request)
     base = CommittedPlan.anchor(path, first, 0, m.dt)
     rng = np.random.default_rng(seed)
     failures, times = [], []
@@ -106,11 +113,14 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--mode", choices=("seamed", "cold"), default="seamed",
                     help="seamed: replan on the planner's last plan; cold: a new planner")
+    ap.add_argument("--states-from", default=None,
+                    help="the method that plans the first window (default: each method "
+                         "itself; another one replans cold, as after a fallback)")
     ap.add_argument("--out", default=str(OUT))
     args = ap.parse_args()
     globs = args.paths.split(",") if args.paths else None
     out: dict = {"meta": {"subset": args.subset, "states": args.states, "seed": args.seed,
-                          "mode": args.mode},
+                          "mode": args.mode, "states_from": args.states_from},
                  "paths": {}, "summary": {}}
     for p in load_corpus(args.subset, skip_long=True):  # the 100k-point ones: hours
         if globs and not any(fnmatch.fnmatch(p.name, g) for g in globs):
@@ -118,7 +128,8 @@ def main() -> int:
         row = out["paths"].setdefault(p.name, {})
         for method in args.methods.split(","):
             try:
-                row[method] = run_path(p, method, args.states, args.seed, args.mode)
+                row[method] = run_path(p, method, args.states, args.seed, args.mode,
+                                       args.states_from)
             except (PlanningError, ValueError, RuntimeError, ArithmeticError) as exc:
                 row[method] = {"error": f"first window: {exc}"[:300]}
             r = row[method]

@@ -60,3 +60,26 @@ def test_replans_from_the_braking_to_rest_at_the_window_end(butterfly_end):
             failed.append((int(k), st, str(exc)[:120]))
     assert moving > 50  # the braking is sampled, not just the rest at its end
     assert not failed, failed[:3]
+
+
+@pytest.mark.xfail(strict=True, reason="known heuristic failure (open, issue 14): the plan "
+                   "passes the heuristic's grid-point verification and breaks the jerk limit "
+                   "23x at a corner between grid points (the engine's checker refuses it)")
+def test_replan_accelerating_into_a_corner_passes_the_checker():
+    """Found by bench/replan_continuity.py (stop 25) on a state of the valley heuristic's
+    first window of c-corners-bspline-2d, and planned the same way without valleys: from
+    s = 173.454 at 26.55 mm/s, +128 mm/s^2 (above the caps ahead: the plan brakes first),
+    one window on; its samples pass a corner near s = 180.5 at ~46 mm/s with an X jerk of
+    915,091 mm/s^3 against 40,000 between two grid points of the heuristic's check."""
+    p = load_corpus("fast", pattern="c-corners-bspline-2d")[0]
+    cfg, m = p.config, p.config.machine
+    path = p.path()
+    lim = m.limits.scaled(cfg.planner.margin)
+    window = horizon_length(lim, np.asarray(m.path_scale, float), cfg.planner.horizon_s)
+    start = PathState(173.45435485684342, 26.550243909589, 128.02939450463606)
+    request = PlanRequest(path, lim, start, min(path.length, start.s + window), 0.0,
+                          p.geometry().feed_cap(), m.dt)
+    try:
+        plan_checked(make_planner("heuristic"), request, 0, np.empty((0, 2)), m.limits)
+    except PlanningError as exc:
+        pytest.fail(str(exc))

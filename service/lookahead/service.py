@@ -141,6 +141,7 @@ class PlannerService:
         self._out_cv = threading.Condition()
         self._out_samples = 0
         self._max_compute_s = 0.0
+        self._late_logged = -math.inf  # when a late batch was last logged (monotonic s)
         self._job_end_due: float | None = None
         self._held: list[Event] = []  # events waiting for their samples to be published
 
@@ -310,13 +311,20 @@ class PlannerService:
             self._next_poll = now + self.config.service.batch * self.config.machine.dt
             return False
         t = time.monotonic()
+        waits, buffered = self.engine.takeover_waits, self._buffered_s()
         batch = self._next_batch()
         # every computation counts, a job's first batch too: its first plan (the slowest
         # of a job) starts the job's clock when published, so nothing waits on it, but it
         # is the best estimate of the replans that follow right after; without it the lead
         # was 50 ms at a job's start and the real-time demo underran 7-14 times (both
         # planners, quiet 2-core machine) once replans took longer than that
-        self._max_compute_s = max(self._max_compute_s, time.monotonic() - t)
+        took = time.monotonic() - t
+        self._max_compute_s = max(self._max_compute_s, took)
+        if took > buffered + self.pacer.lead_s:
+            # the buffer ran dry while this batch was computed: the machine waits
+            log.warning("real time: a batch took %.3f s with %.3f s buffered (%s)", took,
+                        buffered, "waiting for the replan computed ahead"
+                        if self.engine.takeover_waits > waits else "computed at once")
         if batch is None:
             self._next_poll = now + self.config.service.batch * self.config.machine.dt
             return False
@@ -346,8 +354,12 @@ class PlannerService:
             if wait > 0:
                 time.sleep(wait)
             now = time.monotonic()
-            self.stats.max_late_s = max(self.stats.max_late_s,
-                                        self.pacer.late_s(batch.k0, now) + self.pacer.lead_s)
+            late = self.pacer.late_s(batch.k0, now)
+            self.stats.max_late_s = max(self.stats.max_late_s, late + self.pacer.lead_s)
+            if late > 0.0 and now >= self._late_logged + 1.0:  # at most once a second
+                self._late_logged = now
+                log.warning("real time: batch k0=%d of job %s published %.3f s after its "
+                            "first sample was due", batch.k0, batch.job, late)
             self._publish_batch(batch, now)
             if batch.final:
                 self._job_end_due = self.pacer.due_s(batch.k0 + batch.n) - self.pacer.lead_s

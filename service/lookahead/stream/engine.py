@@ -207,6 +207,8 @@ class Engine:
         #: thread, anything else computes them at once, with the same results
         self.executor = executor or InlineExecutor()
         self._inflight: Future | None = None  # the last replan handed to the executor
+        #: replans computed ahead that were not done at their take-over (the engine waited)
+        self.takeover_waits = 0
         self.stop_planner = stop_planner
         #: the shortest-stop search's first try (fast-failing trials, `_begin_stop`)
         self.stop_search_planner = search_planner
@@ -541,6 +543,8 @@ class Engine:
         if pending is None or job.k <= pending.k_at:
             return
         job.pending = None
+        if not pending.future.done():
+            self.takeover_waits += 1
         if self._adopt(job, pending.future.result(), pending.start, pending.s_end,
                        pending.k_at, pending.final):
             job.starved = False
