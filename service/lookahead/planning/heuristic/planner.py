@@ -11,7 +11,9 @@ repaired, on several layouts of planning segments (the fastest verified plan win
    rises follow them).
 3. Junction states (feed and path acceleration) from the scans, one motion per planning
    segment between them (`scan`); where that finds no chain, and as a layout of its own,
-   the paper's junctions with path acceleration 0 (`zero_junctions`). Steps 1-4 run per
+   the paper's junctions with path acceleration 0 (`zero_junctions`). Tight bends pass
+   in valley motions above the caps (`valley`; a valley the chain cannot pass or the
+   verification refuses is dropped, the round planned again). Steps 1-4 run per
    `Layout` (band ratio, budget shares); the fastest verified profile is returned.
 4. Verification of axis velocity, acceleration and jerk at the budget and check points
    (`verify`); failing segments get their V, A, J lowered and steps 2-4 repeat. A profile
@@ -55,7 +57,12 @@ from lookahead.planning.heuristic.scurve import (
     reachable_feed,
 )
 from lookahead.planning.heuristic.split import split_by_loss
-from lookahead.planning.heuristic.verify import failing_segments, sampled_failing_segments
+from lookahead.planning.heuristic.valley import find_valleys, raise_valley_caps
+from lookahead.planning.heuristic.verify import (
+    failing_segments,
+    sampled_failing_runs,
+    sampled_failing_segments,
+)
 from lookahead.planning.heuristic.zero_junctions import (
     first_caps,
     forward_pass,
@@ -92,6 +99,18 @@ RESCUE_BAND_RATIO = 1.1
 #: state that cannot stop in the first one (a compute bound: on a polar dome a replan
 #: merged 60 times, each chain failing, 1.2 s; the merges are for the zero-junction plan)
 FREE_TRIES = 2
+
+
+#: tight bends passed by valley motions inside the scans (`valley`)
+VALLEYS = True
+#: chains tried with valleys per round, each without the valley where the last one gave
+#: up (then one without any; a compute bound: 2 planned the fast corpus as 4 did, 1 lost
+#: the B-spline corners' valleys, 5.903 s against 5.727)
+VALLEY_CHAINS = 2
+#: replans of a round whose only failing segments were at valleys, without those valleys
+#: (not counted as repair rounds: a layout planned with one round after another verified
+#: lost to a refused valley; random XY path, engine: 1.042 -> 1.048 of the LP)
+VALLEY_RETRIES = 2
 
 
 class _RoundsExhaustedError(PlanningError):
@@ -224,6 +243,7 @@ class HeuristicPlanner:
         self.free_junctions = free_junctions
         self._solver = SCurveSolver()
         self._last_layout = 0
+        self._fixed: np.ndarray | None = None  # the last chain's valley segments
         self._brake = Brake(self.shares, margin, self._solver)
 
     # --- public ---------------------------------------------------------------------
@@ -452,10 +472,16 @@ class HeuristicPlanner:
         factor = np.ones(starts.size - 1)
         info: dict = {"rounds": 0, "verified": False, "zero_junction_rounds": 0}
         phases = None
-        for round_ in range(rounds):
-            phases, starts, factor, free = self._profile_phases(
+        ban = np.zeros(starts.size - 1, dtype=bool)  # no valley touches these segments
+        round_, retries = 0, 0
+        while round_ < rounds:
+            phases, new_starts, factor, free = self._profile_phases(
                 request, grid, starts, factor, vlim, limits, shares, layout.zero_fallback,
-                layout.free_junctions, layout.levels, merge)
+                layout.free_junctions, layout.levels, merge, ban, VALLEYS)
+            if new_starts.size != starts.size:
+                ban = np.zeros(new_starts.size - 1, dtype=bool)
+            starts = new_starts
+            fixed = self._fixed if free else None
             info["zero_junction_rounds"] += int(not free)
             if beat is not None and round_ == rounds - 1 and \
                     not float(np.sum(phases.duration)) < beat:
@@ -467,11 +493,29 @@ class HeuristicPlanner:
                 failing = sampled_failing_segments(request.path, profile, grid, starts,
                                                    request.limits, request.dt)
                 info["sampled_repairs"] = info.get("sampled_repairs", 0) + int(failing.any())
+            elif not failing.any() and fixed is not None and fixed.size == failing.size:
+                failing = sampled_failing_runs(request.path, profile, grid, starts, fixed,
+                                               request.limits, request.dt)
             info["rounds"] = round_ + 1
             if not failing.any():
                 info["verified"] = True
+                if fixed is not None:
+                    info["valley_segments"] = int(np.count_nonzero(fixed))
                 break
+            if fixed is not None and fixed.size == failing.size:
+                # a failing valley, or a segment next to one: the next round plans these
+                # without valleys (and without lowering their budgets for it)
+                near = fixed.copy()
+                near[1:] |= fixed[:-1]
+                near[:-1] |= fixed[1:]
+                hit = failing & near
+                ban |= _spans_of(fixed, hit)
+                failing = failing & ~hit
+                if hit.any() and not failing.any() and retries < VALLEY_RETRIES:
+                    retries += 1  # only valleys failed: this round again without them
+                    continue
             factor = np.where(failing, factor * REPAIR_STEP, factor)
+            round_ += 1
         info["segments"] = int(starts.size - 1)
         info["cells"] = grid.ncells
         if not info["verified"]:
@@ -483,7 +527,8 @@ class HeuristicPlanner:
                         factor: np.ndarray, vlim: np.ndarray, limits: AxisLimits,
                         shares: BudgetShares, zero_fallback: bool = True,
                         free: bool = True,
-                        levels: tuple[float, ...] | None = None, merge: bool = True
+                        levels: tuple[float, ...] | None = None, merge: bool = True,
+                        ban: np.ndarray | None = None, valleys: bool = False
                         ) -> tuple[Phases, np.ndarray, np.ndarray, bool]:
         """The phases of one round: the free-junction chain, else zero junctions. If the
         start state cannot reach a valid end state within the first segment, its cruise
@@ -502,7 +547,8 @@ class HeuristicPlanner:
                 if levels is not None:
                     b, lv = level_budgets(grid, starts, vlim, limits, shares, b, factor,
                                           v_cap, levels)
-                parts = self._free_parts(request, grid, starts, b, lv)
+                parts = self._free_parts(request, grid, starts, b, lv,
+                                         (vlim, limits, shares, ban) if valleys else None)
                 if parts is not None:
                     return concat_phases(parts), starts, factor, True
                 if not zero_fallback:
@@ -534,9 +580,46 @@ class HeuristicPlanner:
                     v_cap = np.full(starts.size - 1, np.inf)
 
     def _free_parts(self, request: PlanRequest, grid: PathGrid, starts: np.ndarray,
-                    b, levels: FeedLevels | None = None) -> list[Phases] | None:
+                    b, levels: FeedLevels | None = None, valley_args: tuple | None = None
+                    ) -> list[Phases] | None:
+        """The free-junction chain's phases per segment, or None. `valley_args` (vlim,
+        limits, shares; with levels): tight bends passed by valley motions (`valley`)."""
+        self._fixed = None
+        if valley_args is not None and levels is not None:
+            vlim, limits, shares, ban = valley_args
+            cap = junction_caps(request, grid, starts, b)
+            hard = grid.c1_cap
+            if request.feed_cap is not None:
+                hard = np.minimum(hard, request.feed_cap.at(grid.s[:, 1]))
+            valleys = find_valleys(grid, starts, b, levels, vlim, cap, limits, shares,
+                                   neighbour_min(b.J), ban, hard)
+            for _ in range(VALLEY_CHAINS):
+                if not valleys:
+                    break
+                broken: list[int] = []
+                got = self._chain(request, grid, starts, b, levels, valleys, broken)
+                if got is not None:
+                    self._fixed = got[1].get("fixed")
+                    return got[0]
+                # no chain through the valleys: again without the one where it gave up
+                # (the first ending at or after that segment), else without any
+                k = broken[0] if broken else -1
+                drop = next((i for i, vy in enumerate(valleys) if vy.k1 + 1 >= k), None)
+                if k < 0 or drop is None:
+                    break
+                valleys = valleys[:drop] + valleys[drop + 1:]
+        got = self._chain(request, grid, starts, b, levels, None)
+        return None if got is None else got[0]
+
+    def _chain(self, request: PlanRequest, grid: PathGrid, starts: np.ndarray, b,
+               levels: FeedLevels | None, valleys: list | None,
+               broken: list | None = None):
+        """`scan.chain` from the request's start state (with `valleys`, their exit caps
+        raised)."""
         st = request.start
         cap = junction_caps(request, grid, starts, b)
+        if valleys:
+            valleys = raise_valley_caps(valleys, b, cap)
         # the chain's fallback feeds keep 1e-6 of each segment spare: at the exact
         # compatibility limit Ruckig's rounding refuses the zero-acceleration S-curve
         slack = 1.0 - 1e-6
@@ -548,12 +631,32 @@ class HeuristicPlanner:
         V0, A0 = first_caps(st.v, st.a, float(b.V[0]), float(b.A[0]), self.margin)
         b = replace(b, V=np.concatenate([[max(V0, b.V[0])], b.V[1:]]))
         cap[0] = st.v
-        got = chain(self._solver, b, cap, w, (st.v, st.a), float(cap[-1]), A0,
-                    neighbour_min(b.J), neighbour_min(b.A), levels)
-        return None if got is None else got[0]
+        return chain(self._solver, b, cap, w, (st.v, st.a), float(cap[-1]), A0,
+                     neighbour_min(b.J), neighbour_min(b.A), levels, valleys, broken)
 
     def _result(self, profile: FeedProfile, t_start: float, info: dict) -> PlanResult:
         return PlanResult(profile, self.name, time.perf_counter() - t_start, info)
+
+
+def _spans_of(fixed: np.ndarray, hit: np.ndarray) -> np.ndarray:
+    """The runs of `fixed` (valley spans) that `hit` touches (at or next to them), with
+    their neighbours."""
+    out = np.zeros(fixed.size, dtype=bool)
+    idx = np.nonzero(hit)[0]
+    n = fixed.size
+    for i in idx.tolist():
+        lo = hi = i
+        if not fixed[i]:  # next to a span: the span on that side
+            if i + 1 < n and fixed[i + 1]:
+                lo = hi = i + 1
+            elif i > 0 and fixed[i - 1]:
+                lo = hi = i - 1
+        while lo > 0 and fixed[lo - 1]:
+            lo -= 1
+        while hi + 1 < n and fixed[hi + 1]:
+            hi += 1
+        out[max(lo - 1, 0):min(hi + 2, n)] = True
+    return out
 
 
 def _rest_profile(s: float, dt: float) -> FeedProfile:

@@ -24,6 +24,11 @@ junction k is the start of segment k (junction nseg is the window's end) and has
    lies in that segment) and the chain follows the scan's own motions until a rise fits
    again. If neither fits, the blend is moved a junction back (backtracking), at the start
    over several segments at once.
+3. Valleys (`valley`, with feed levels): at a tight bend the backward scan takes a
+   valley's motion over its span of segments where a motion from its exit reaches the
+   scan's state after it, and goes on from its entry; nothing else writes into a span
+   (restart rises land before it, merges do not cross it), and the chain follows the
+   span's motion or backs out of it.
 Rises are closed-form feed changes (`rise`: one budget, or the segment's feed levels
 where given), blends are Ruckig
 state-to-state segments (target feed and acceleration). Returns None when no chain is
@@ -45,6 +50,7 @@ from lookahead.planning.heuristic.scurve import (
     SegmentInfeasibleError,
     split_at,
 )
+from lookahead.planning.heuristic.valley import Valley
 
 _REL = 1e-9  # relative feed tolerance when comparing a scan state with a cap
 #: relative room on the cruise cap given to Ruckig (see `chain.solve`)
@@ -84,7 +90,8 @@ def _level_rise(solver: SCurveSolver, levels: FeedLevels | None, k: int, nb: int
 def backward_scan(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: np.ndarray,
                   v_end: float, A: np.ndarray, J: np.ndarray, solve,
                   levels: FeedLevels | None = None, keep_first: bool = False,
-                  first_curve: list | None = None
+                  first_curve: list | None = None, valleys: list[Valley] | None = None,
+                  fixed: np.ndarray | None = None
                   ) -> tuple[np.ndarray, list[Phases | None]]:
     """(nseg + 1, 2) backward scan states (v, a) at the junctions (a forward in time), and
     per segment the scan's own motion from its state at k to the one at k + 1 (forward in
@@ -99,13 +106,33 @@ def backward_scan(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: n
     `first_curve` (a list): receives the scan's fastest motion over segment 0 onto the
     state at junction 1 as it is before any cap (forward in time; nothing if it stops)
     and that state,
-    where the chain lands a start state that lies inside it (`_land_in_first`)."""
+    where the chain lands a start state that lies inside it (`_land_in_first`).
+
+    `valleys` (with levels): motions over spans of segments around tight bends
+    (`valley.find_valleys`), whose exit junction's cap the caller raised to the next
+    segment's (`raise_valley_caps`). Where the motion from a valley's exit onto the scan
+    exists, the span takes the valley's states and motions (marked in `fixed`, which the
+    chain then follows) and the scan goes on from its entry; else that cap is restored
+    and the scan goes on as without it."""
     n = b.L.size
+    after = {} if not valleys or levels is None else {v.k1 + 1: v for v in valleys}
+    if fixed is None:
+        fixed = np.zeros(n, dtype=bool)
+    skip = -1  # segments k >= skip are a valley's, already filled
     out = np.zeros((n + 1, 2))
     out[n] = v_end, 0.0
     motions: list[Phases | None] = [None] * n
     soft = np.zeros(n + 1, dtype=bool)  # states from forward rises (`_rise_onto`)
     for k in range(n - 1, -1, -1):
+        if k >= skip >= 0:
+            continue
+        vy = after.get(k)
+        if vy is not None:
+            if _take_valley(solver, b, cap, A, J, levels, solve, out, motions, soft, vy):
+                fixed[vy.k0:vy.k1 + 1] = True
+                skip = vy.k0
+                continue
+            cap[k] = vy.cap  # restored: as without the valley
         v, a = float(out[k + 1, 0]), -float(out[k + 1, 1])
         L, V, Ak, Jk, c = float(b.L[k]), float(b.V[k]), float(A[k]), float(J[k]), float(cap[k])
         got = _level_rise(solver, levels, k, k - 1 if k > 0 else None, 0.0, L, v, a, V, Ak,
@@ -129,8 +156,9 @@ def backward_scan(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: n
             # hold the whole rise from the start at a = 0 junctions
             continue
         if levels is not None:
-            args = (solver, b, cap, A, J, levels, solve, out, motions, soft, k)
-            if _rises_onto(args, False) or _merge_onto(b, cap, solve, out, motions, k):
+            args = (solver, b, cap, A, J, levels, solve, out, motions, soft, k, fixed)
+            if _rises_onto(args, False) or _merge_onto(b, cap, solve, out, motions, k,
+                                                       fixed):
                 continue
             if _restart_lower(args, c, float(w[k])):
                 continue
@@ -141,7 +169,10 @@ def backward_scan(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: n
             out[k] = w[k], 0.0
         for i in range(k, n):
             motions[i] = solve(i, out[i], out[i + 1])
-            if motions[i] is not None or i + 1 == n:
+            if motions[i] is not None or i + 1 == n or fixed[i + 1]:
+                # (at a valley's entry the fallback stops: no chain; the planner plans
+                # again without that valley. Given up in place, the zero-acceleration
+                # feeds ran on over its span and beyond: butterfly, 17 % of junctions)
                 break
             # the zero-acceleration feeds connect up to rounding at the exact
             # compatibility limit: lower the next one by a hair if Ruckig disagrees
@@ -151,6 +182,55 @@ def backward_scan(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: n
                 if motions[i] is not None:
                     break
     return out, motions
+
+
+def _take_valley(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, A: np.ndarray,
+                 J: np.ndarray, levels: FeedLevels, solve, out: np.ndarray, motions: list,
+                 soft: np.ndarray, vy: Valley) -> bool:
+    """In place: the valley `vy` in the backward scan, if a motion from its exit state
+    (at junction k1 + 1) through segment k1 + 1 reaches the scan's state after (Ruckig, or
+    forward rises onto the scan: `_rises_onto`); the span's states and motions are the
+    valley's. False (nothing changed) otherwise."""
+    n = b.L.size
+    j = vy.k1 + 1
+    saved = out.copy(), list(motions), soft.copy()
+    out[j] = vy.exit
+    ok = j == n
+    if not ok:
+        m = solve(j, out[j], out[j + 1])
+        if m is not None:
+            motions[j] = m
+            ok = True
+        else:
+            ok = _rises_onto((solver, b, cap, A, J, levels, solve, out, motions, soft, j,
+                              None), False)
+    parts = _split_valley(b, vy) if ok else None
+    if parts is None:
+        out[:] = saved[0]
+        motions[:] = saved[1]
+        soft[:] = saved[2]
+        return False
+    out[vy.k0] = vy.entry
+    for i, (part, state) in enumerate(parts):
+        motions[vy.k0 + i] = part
+        if state is not None:
+            out[vy.k0 + i + 1] = state
+    return True
+
+
+def _split_valley(b: SegmentBudgets, vy: Valley) -> list | None:
+    """The valley's motion split at the junctions inside its span: per segment its part
+    and the state at its end (None for the last: the exit)."""
+    motion = vy.phases
+    parts = []
+    for i in range(vy.k0 + 1, vy.k1 + 1):
+        got = split_at(motion, float(b.s0[i]))
+        if got is None:
+            return None
+        first, motion, v, a = got
+        parts.append((first, (v, a)))
+    parts.append((motion, None))
+    return parts
 
 
 #: restart feeds tried below a cap where no rise from the cap lands on the scan, as
@@ -176,25 +256,27 @@ def _restart_lower(args: tuple, c: float, w: float) -> bool:
 
 
 def _merge_onto(b: SegmentBudgets, cap: np.ndarray, solve, out: np.ndarray, motions: list,
-                k: int) -> bool:
+                k: int, fixed: np.ndarray | None = None) -> bool:
     """In place: one Ruckig motion from the restart state at junction k over segments
     k .. k + m - 1 onto the scan's state at junction k + m (m = 2 .. MAX_MERGE), split into
     per-segment motions and the states at the junctions between; False if none exists.
     (A scan state just after a short segment, decelerating hard above the cap before it,
     is reachable only by a motion over several segments.)"""
     n = b.L.size
-    return any(_merge_span(b, cap, solve, out, motions, k, m)
+    return any(_merge_span(b, cap, solve, out, motions, k, m, fixed)
                for m in range(2, min(MAX_MERGE, n - k) + 1))
 
 
 def _merge_span(b: SegmentBudgets, cap: np.ndarray, solve, out: np.ndarray, motions: list,
-                k: int, m: int) -> bool:
+                k: int, m: int, fixed: np.ndarray | None = None) -> bool:
     """In place: one Ruckig motion from the state at junction k over segments
     k .. k + m - 1 onto the state at junction k + m, split into per-segment motions and
     the states at the junctions between; False (nothing changed) if there is none. The
     motion must pass each junction within its cap (0 at a corner: no merge across it)."""
     if any(c <= 0.0 for c in cap[k + 1:k + m].tolist()):
         return False
+    if fixed is not None and fixed[k:k + m].any():
+        return False  # a valley's span keeps its motion
     motion = solve(k, out[k], out[k + m], m)
     if motion is None:
         return False
@@ -226,8 +308,8 @@ def _rises_onto(args: tuple, try_first: bool) -> bool:
 
 def _rise_onto(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, A: np.ndarray,
                J: np.ndarray, levels: FeedLevels, solve, out: np.ndarray,
-               motions: list, soft: np.ndarray, k: int, try_first: bool,
-               pass_soft: bool = True) -> bool | None:
+               motions: list, soft: np.ndarray, k: int, fixed: np.ndarray | None,
+               try_first: bool, pass_soft: bool = True) -> bool | None:
     """In place: the states after a restart at junction k that Ruckig cannot connect to
     the scan's next state, from forward rises out of the restart state (fastest first, under
     the feed levels, gentler where the fastest would overshoot the scan's next states:
@@ -246,6 +328,8 @@ def _rise_onto(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, A: np.n
     x = (float(out[k, 0]), float(out[k, 1]))
     passed = False
     for i in range(k, min(n, k + MAX_ONTO)):
+        if fixed is not None and fixed[i]:
+            break  # rises land before a valley's span (its entry is a hard state)
         target = out[i + 1].copy()
         if i > k or try_first:
             m = solve(i, x, target)
@@ -267,9 +351,11 @@ def _rise_onto(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, A: np.n
             got = _rise(solver, float(b.s0[i]), float(b.L[i]), x[0], x[1],
                         min(float(b.V[i]), float(target[0])), float(A[i]), Ji)
         if got is None or (hard and got[1] > target[0] * (1 + _REL)):
-            if _land_back(b, cap, solve, out, motions, k, i):
+            if _land_back(b, cap, solve, out, motions, k, i, fixed):
                 return True
             break
+        if fixed is not None and fixed[i + 1]:
+            break  # the next junction is a valley's entry: only landing on it (above)
         if i + 2 <= n and not (pass_soft and soft[i + 2]):
             got = _land_gently(solver, b, i, x, got, target, out[i + 2], A, J)
         out[i + 1] = got[1], got[2]
@@ -289,7 +375,7 @@ LAND_BACK, LAND_AHEAD = 4, 4
 
 
 def _land_back(b: SegmentBudgets, cap: np.ndarray, solve, out: np.ndarray, motions: list,
-               k: int, i: int) -> bool:
+               k: int, i: int, fixed: np.ndarray | None = None) -> bool:
     """In place: where the forward rise from the restart at junction k, at junction i,
     cannot stay below the scan, one Ruckig motion (`_merge_span`) from a rise state at a
     junction j in i, i - 1, ... (back to k) onto the scan's state at a junction after i;
@@ -301,7 +387,7 @@ def _land_back(b: SegmentBudgets, cap: np.ndarray, solve, out: np.ndarray, motio
         for t in range(i + 1, min(n, i + LAND_AHEAD) + 1):
             if (j, t) == (i, i + 1):
                 continue  # tried by `_rise_onto` itself
-            if _merge_span(b, cap, solve, out, motions, j, t - j):
+            if _merge_span(b, cap, solve, out, motions, j, t - j, fixed):
                 return True
     return False
 
@@ -398,10 +484,18 @@ def _far_below(rise: tuple[Phases, float, float], b1: np.ndarray, b2: np.ndarray
     return v + a * abs(a) / (2.0 * J) <= FAR_BELOW * min(float(b1[0]), float(b2[0]))
 
 
+def _failed(broken: list | None, k: int) -> None:
+    """A chain that found no motion: the segment where it gave up, into `broken`."""
+    if broken is not None:
+        broken.append(k)
+    return None
+
+
 def chain(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: np.ndarray,
           start: tuple[float, float],
           v_end: float, A_first: float, J_scan: np.ndarray, A_scan: np.ndarray,
-          levels: FeedLevels | None = None) -> tuple[list[Phases], dict] | None:
+          levels: FeedLevels | None = None, valleys: list[Valley] | None = None,
+          broken: list | None = None) -> tuple[list[Phases], dict] | None:
     """One motion per planning segment between free junction states (module doc).
 
     Invariant (where it can be kept): the state reached at junction k can reach the
@@ -446,10 +540,14 @@ def chain(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: np.ndarra
             return None
 
     curve: list = []
+    fixed = np.zeros(n, dtype=bool)  # segments on a valley's motion (`backward_scan`)
     bwd, bmot = backward_scan(solver, b, cap, w, v_end, A_sc, J_scan, solve, levels,
-                              keep_first=levels is not None, first_curve=curve)
+                              keep_first=levels is not None, first_curve=curve,
+                              valleys=valleys, fixed=fixed)
+    if fixed.any():
+        stats["fixed"] = fixed
     if any(m is None for m in bmot[1:]):
-        return None
+        return _failed(broken, next(i for i in range(1, n) if bmot[i] is None))
     parts: list[Phases] = []
     states = [(float(start[0]), float(start[1]))]  # the state reached at each junction
     blend: Phases | None = None  # a known motion from states[k] to bwd[k + 1]
@@ -457,48 +555,59 @@ def chain(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: np.ndarra
     while k < n:
         steps += 1
         if steps > 4 * n + 16:
-            return None
+            return _failed(broken, k)
         x = states[k]
-        rise = None
-        # a deceleration beyond the segment's budget is the backward scan's, under its
-        # feed levels: nothing rises faster from there (the scan is the fastest state),
-        # and a rise would first need Ruckig to brake it (70 % of the rises on a dome)
-        if k + 1 < n and not (levels is not None and x[1] < -float(A_seg[k])):
-            rise = _rise_below(solver, b, k, x, float(A_seg[k]), float(J_scan[k]),
-                               float(cap[k + 1]), levels)
-            if rise is not None and rise[1] > bwd[k + 1, 0] * (1 + _REL):
-                rise = None
-        if rise is not None and _far_below(rise, bwd[k + 1], bwd[k + 2], Js[k]):
-            parts.append(rise[0])  # no check needed yet (backtracking covers a miss)
-            states.append((rise[1], rise[2]))
-            blend, k = None, k + 1
-            stats["rises"] += 1
-            continue
-        if rise is not None:
-            nxt = solve(k + 1, (rise[1], rise[2]), bwd[k + 2])
-            if nxt is not None:  # the rise keeps the invariant
-                parts.append(rise[0])
-                states.append((rise[1], rise[2]))
-                blend, k = nxt, k + 1
-                stats["rises"] += 1
-                continue
-        if blend is None or blend is bmot[k]:
-            # the scan's own motion is feasible but not time-optimal (it holds the feed
-            # and accelerates as late as possible): Ruckig's motion is used where it exists
-            blend = solve(k, x, bwd[k + 1]) or blend
-        if blend is not None:  # onto the backward scan
-            parts.append(blend)
+        if fixed[k] and x == (float(bwd[k, 0]), float(bwd[k, 1])):
+            parts.append(bmot[k])  # on a valley's motion: follow it
             states.append((float(bwd[k + 1, 0]), float(bwd[k + 1, 1])))
             blend = bmot[k + 1] if k + 1 < n else None
             k += 1
-            stats["blends"] += 1
             continue
-        if rise is not None:  # far below the backward scan: rise, no guarantee yet
-            parts.append(rise[0])
-            states.append((rise[1], rise[2]))
-            k += 1
-            stats["rises"] += 1
-            continue
+        rise = None
+        if fixed[k]:
+            # off a valley's motion inside its span (its feed lies above the
+            # segments' caps): no motion of the budgets; back out of the span
+            blend = None
+        else:
+            # a deceleration beyond the segment's budget is the backward scan's, under its
+            # feed levels: nothing rises faster from there (the scan is the fastest state),
+            # and a rise would first need Ruckig to brake it (70 % of the rises on a dome)
+            if k + 1 < n and not (levels is not None and x[1] < -float(A_seg[k])):
+                rise = _rise_below(solver, b, k, x, float(A_seg[k]), float(J_scan[k]),
+                                   float(cap[k + 1]), levels)
+                if rise is not None and rise[1] > bwd[k + 1, 0] * (1 + _REL):
+                    rise = None
+            if rise is not None and _far_below(rise, bwd[k + 1], bwd[k + 2], Js[k]):
+                parts.append(rise[0])  # no check needed yet (backtracking covers a miss)
+                states.append((rise[1], rise[2]))
+                blend, k = None, k + 1
+                stats["rises"] += 1
+                continue
+            if rise is not None:
+                nxt = solve(k + 1, (rise[1], rise[2]), bwd[k + 2])
+                if nxt is not None:  # the rise keeps the invariant
+                    parts.append(rise[0])
+                    states.append((rise[1], rise[2]))
+                    blend, k = nxt, k + 1
+                    stats["rises"] += 1
+                    continue
+            if blend is None or blend is bmot[k]:
+                # the scan's own motion is feasible but not time-optimal (it holds the feed
+                # and accelerates as late as possible): Ruckig's motion is used where it exists
+                blend = solve(k, x, bwd[k + 1]) or blend
+            if blend is not None:  # onto the backward scan
+                parts.append(blend)
+                states.append((float(bwd[k + 1, 0]), float(bwd[k + 1, 1])))
+                blend = bmot[k + 1] if k + 1 < n else None
+                k += 1
+                stats["blends"] += 1
+                continue
+            if rise is not None:  # far below the backward scan: rise, no guarantee yet
+                parts.append(rise[0])
+                states.append((rise[1], rise[2]))
+                k += 1
+                stats["rises"] += 1
+                continue
         # stuck: blend onto the backward scan one junction earlier
         while True:
             if k == floor and k == 0:  # from the start over several segments at once
@@ -509,7 +618,7 @@ def chain(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: np.ndarra
                 if blend is None:
                     landed = _land_in_first(b, curve, states[0], bwd[1], solve)
                     if landed is None:
-                        return None
+                        return _failed(broken, k)
                     parts = [landed]
                     states = [states[0], (float(bwd[1, 0]), float(bwd[1, 1]))]
                     k = floor = 1
@@ -523,12 +632,16 @@ def chain(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: np.ndarra
                 stats["merged"] = m
                 break
             if k <= floor or stats["backtracks"] > 4 * n:
-                return None
+                return _failed(broken, k)
             stats["backtracks"] += 1
             parts.pop()
             states.pop()
             k -= 1
-            blend = solve(k, states[k], bwd[k + 1])
+            if fixed[k]:  # inside a valley's span: only its own motion
+                on = states[k] == (float(bwd[k, 0]), float(bwd[k, 1]))
+                blend = bmot[k] if on else None
+            else:
+                blend = solve(k, states[k], bwd[k + 1])
             if blend is not None:
                 break
     return parts, stats

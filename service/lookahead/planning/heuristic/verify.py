@@ -15,6 +15,7 @@ from lookahead.limits import AxisLimits
 from lookahead.planning.base import FeedProfile
 from lookahead.planning.heuristic.path_limits import PathGrid
 from lookahead.planning.heuristic.profile_build import state_at_s
+from lookahead.planning.profile_ops import slice_profile
 from lookahead.planning.sampled_check import profile_ratios
 
 #: largest feed at a corner, as a fraction of the smallest axis vmax (plans stop there: a
@@ -132,4 +133,38 @@ def sampled_failing_segments(path: Path, profile: FeedProfile, grid: PathGrid,
     seg = np.clip(np.searchsorted(seg_edges, s_bad, side="right") - 1, 0, nseg - 1)
     out = np.zeros(nseg, dtype=bool)
     out[seg] = True
+    return out
+
+
+def sampled_failing_runs(path: Path, profile: FeedProfile, grid: PathGrid,
+                         starts: np.ndarray, runs: np.ndarray, lim: AxisLimits,
+                         dt: float) -> np.ndarray:
+    """(nseg,) True on each run of `runs` (contiguous True segments: the valley spans)
+    where the finite differences of positions sampled every dt / 4 over the run's stretch
+    of the profile (3 dt either side) exceed `lim`: `sampled_failing_segments` on the
+    valleys alone. A valley passes a tight bend faster than any cruise, and the grid points
+    can miss a term peaking between them there: a replan from a state on a valley plan of
+    c-corners-bspline-2d passed a corner at 46 mm/s with 23x jmax between two points (the
+    engine's checker refused it). Costs the valleys' time, not the whole profile's."""
+    nseg = starts.size - 1
+    out = np.zeros(nseg, dtype=bool)
+    if not runs.any():
+        return out
+    T = profile.duration
+    t_grid = np.linspace(0.0, T, max(int(T / dt) * 2, 2) + 1)
+    s_grid = np.maximum.accumulate(profile.at(t_grid)[0])
+    edges = grid.edges[starts]
+    change = np.flatnonzero(np.diff(np.concatenate([[0], runs.astype(np.int8), [0]])))
+    for k0, k1 in zip(change[::2], change[1::2], strict=True):  # segments k0 .. k1 - 1
+        t0, t1 = np.interp([edges[k0], edges[k1]], s_grid, t_grid)
+        lo, hi = max(t0 - 3.0 * dt, 0.0), min(t1 + 3.0 * dt, T)
+        if hi - lo < 4.0 * dt:
+            continue
+        ratios = profile_ratios(path, slice_profile(profile, lo, hi), lim, dt)
+        # judge differences whose samples lie inside the slice (its end is held beyond)
+        inside = hi - lo - 2.0 * dt
+        bad = any(np.any((r > 1.0 + 1e-9) & (t <= inside))
+                  for r, t in ((ratios.vel, ratios.t_vel), (ratios.acc, ratios.t_acc),
+                               (ratios.jerk, ratios.t_jerk)))
+        out[k0:k1] = bad
     return out
