@@ -53,6 +53,21 @@ class GatedPlanner:
         return self.inner.plan(request)
 
 
+def run_until_gated(cfg, planner: GatedPlanner, pool: ThreadPoolExecutor
+                    ) -> tuple[Engine, list[SetpointBatch]]:
+    """A real-time engine on `job_segments` with a worker, run until a replan blocks at
+    the gate: the engine and its batches so far (none final)."""
+    engine = Engine(cfg, planner, realtime=True, executor=pool)
+    for seg in job_segments():
+        engine.submit(seg)
+    batches = []
+    while not planner.entered.is_set():
+        batch = engine.next_batch()
+        assert batch is not None and not batch.final
+        batches.append(batch)
+    return engine, batches
+
+
 def run_to_end(engine: Engine, limit: int = 100000) -> list[SetpointBatch]:
     out: list[SetpointBatch] = []
     for _ in range(limit):
@@ -108,14 +123,7 @@ def test_samples_keep_coming_while_a_replan_is_computed() -> None:
     cfg = default_config()
     planner = GatedPlanner("heuristic")
     with ThreadPoolExecutor(max_workers=1) as pool:
-        engine = Engine(cfg, planner, realtime=True, executor=pool)
-        for seg in job_segments():
-            engine.submit(seg)
-        batches = []
-        while not planner.entered.is_set():
-            batch = engine.next_batch()
-            assert batch is not None and not batch.final
-            batches.append(batch)
+        engine, batches = run_until_gated(cfg, planner, pool)
         k_asked = batches[-1].k0 + batches[-1].n - 1
         for _ in range(30):  # 0.3 s of samples (it takes over ~0.4 s ahead), still blocked
             batches.append(engine.next_batch())
@@ -134,12 +142,7 @@ def test_a_hold_during_a_replan_under_way_stops_without_waiting_for_it() -> None
     cfg = default_config()
     planner = GatedPlanner("heuristic")
     with ThreadPoolExecutor(max_workers=1) as pool:
-        engine = Engine(cfg, planner, realtime=True, executor=pool)
-        for seg in job_segments():
-            engine.submit(seg)
-        batches = []
-        while not planner.entered.is_set():
-            batches.append(engine.next_batch())
+        engine, batches = run_until_gated(cfg, planner, pool)
         assert engine.command(Command("hold")).ok
         for _ in range(300):  # 3 s: the stop from full feed takes well under that
             batches.append(engine.next_batch())
