@@ -307,6 +307,8 @@ class HeuristicPlanner:
             end = phases_end(brake)
             if not end.s < s_end:
                 break
+            if _crosses_corner(grid, request.start.s, end.s):
+                continue  # the machine must be at rest at a corner: not this brake
             if (end.s, end.v, end.a) in tried:
                 continue  # the same rest as a target that failed
             tried.add((end.s, end.v, end.a))
@@ -636,6 +638,12 @@ class HeuristicPlanner:
 
     def _result(self, profile: FeedProfile, t_start: float, info: dict) -> PlanResult:
         return PlanResult(profile, self.name, time.perf_counter() - t_start, info)
+
+
+def _crosses_corner(grid: PathGrid, s0: float, s1: float) -> bool:
+    """True if a corner of the grid (where the machine must be at rest) lies in (s0, s1)."""
+    ends = grid.edges[1:][grid.corner_after]
+    return bool(np.any((ends > s0) & (ends < s1)))
 
 
 def _spans_of(fixed: np.ndarray, hit: np.ndarray) -> np.ndarray:
