@@ -21,6 +21,7 @@ from lookahead.config import ConfigError, build_config, load_config, machine_nam
 from lookahead.geometry.gcode import read_gcode
 from lookahead.geometry.spline_path import fit_points
 from lookahead.planning.base import PathState, PlanRequest
+from lookahead.planning.heuristic import HeuristicPlanner
 from lookahead.sampling import sample_profile, sample_times
 from lookahead.stream.planners import make_planner
 from lookahead_clients.cam_program import WindingProgram, gcode
@@ -193,7 +194,10 @@ def test_large_mandrel_angles_keep_the_paths_precision():
     """The same stroke at C = 0 and at C = 190,000 deg: the same length to 1e-12, the same
     plan to 1e-6 (the offset moves the points by their last bits, ~3e-11 deg, and the
     planner's decisions amplify that: bench/replay_tolerance.py), the same motion relative
-    to the start to 1e-6 deg, and the checker passes at both."""
+    to the start to 1e-6 deg, and the checker passes at both. The heuristic without
+    valleys: a valley is a discrete choice at its checks' edges, and these last bits flip
+    one (23 valley segments against 22, 0.22 % winding time; both plans pass the checker),
+    which is the planner's choice, not the geometry's precision that this test is about."""
     t = np.linspace(0.0, 1.0, 300)
     stroke = np.column_stack([300.0 * t, 200.0 * t + 20.0 * np.sin(4 * np.pi * t)])
     cfg = build_config({})
@@ -201,8 +205,8 @@ def test_large_mandrel_angles_keep_the_paths_precision():
     results = []
     for offset in (0.0, 190_000.0):
         path = fit_points(stroke + np.array([0.0, offset]), scale, "cubic")
-        plan = make_planner("heuristic").plan(PlanRequest(path, cfg.machine.limits,
-                                                          PathState(0.0), path.length, dt=1e-3))
+        request = PlanRequest(path, cfg.machine.limits, PathState(0.0), path.length, dt=1e-3)
+        plan = HeuristicPlanner(margin=1.0, valleys=False).plan(request)
         pos = sample_profile(path, plan.profile, sample_times(plan.profile.duration, 1e-3)).pos
         checker = LimitChecker(cfg.machine.limits, 1e-3)
         checker.feed(pos)

@@ -32,7 +32,7 @@ def dome():
     return p, request
 
 
-def test_dome_passes_its_bends_in_valleys(dome, monkeypatch):
+def test_dome_passes_its_bends_in_valleys(dome):
     """With valleys the dome winds 8 % faster (2.181 s -> 1.996 s; the windowed LP:
     1.789 s), the plan verified and its sampled stream within the checker's limits."""
     p, request = dome
@@ -43,8 +43,7 @@ def test_dome_passes_its_bends_in_valleys(dome, monkeypatch):
     report = check_positions(sample_plan(request.path, result.profile, m.dt).pos, m.limits,
                              m.dt)
     assert report.ok, report.first
-    monkeypatch.setattr(heuristic_planner, "VALLEYS", False)
-    without = HeuristicPlanner(margin=1.0).plan(request)
+    without = HeuristicPlanner(margin=1.0, valleys=False).plan(request)
     assert without.profile.duration > 1.05 * result.profile.duration
 
 
@@ -112,7 +111,6 @@ def test_a_refused_valley_is_replanned_without_it_in_the_same_round(dome, monkey
     assert result.info["verified"] and result.info["rounds"] == 1
     assert len(calls) == 2
     assert 0 < result.info["valley_segments"] < free.info["valley_segments"]
-    monkeypatch.setattr(heuristic_planner, "VALLEYS", False)
-    without = HeuristicPlanner(margin=1.0, layouts=layouts).plan(request)
+    without = HeuristicPlanner(margin=1.0, layouts=layouts, valleys=False).plan(request)
     # the other valley kept: between the plan with both and the plan with none
     assert free.profile.duration <= result.profile.duration < without.profile.duration
