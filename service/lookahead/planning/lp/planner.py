@@ -21,7 +21,9 @@ A moving start (not on the last plan) is handed over by another plan, often one 
 full limits (the heuristic's, after a fallback), while the LP's rows are the limits times
 margins; built in, always: the velocity caps leave room for the braking from the start
 state (`_brake_room`: from v_cap with a = 0 no bounded jerk reaches 0.995 v_cap within one
-node, the cascade of issue 13), a braking start's envelope releases at least as fast as
+node, the cascade of issue 13; where that braking cannot come to rest within the window,
+the room is capped by the way into the end at its own tangents, `_rest_caps`), a braking
+start's envelope releases at least as fast as
 a0^2 / v0 (else it forced a stall), the first node has an exact jerk row
 (`rows.start_jerk_rows`), and a start above the limits (an override) is judged against
 its own excess while a braking could not yet have removed it (`_start_allowance`; an
