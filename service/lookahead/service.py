@@ -68,6 +68,11 @@ MAX_SLEEP_S = 0.01
 TAKE_IN_MAX_S = 0.05
 #: fast mode: batches published between two looks at commands and status
 FAST_BURST = 50
+#: real-time mode: longest the main loop spends producing batches at a time (s). It used to
+#: produce one batch (10 ms of motion) per loop, after a take-in pass of up to
+#: TAKE_IN_MAX_S: while the 100k-line program's segments came in after its start, the
+#: service fell 0.89 s behind real time (bench/long_program.py --realtime, stop 25)
+PRODUCE_MAX_S = 0.05
 #: real-time mode: produce at least this far ahead of publication, plus 1.5 x the longest
 #: batch computation seen (a replan, a stop or a job's first plan), at most
 #: MAX_AHEAD_S (s)
@@ -302,14 +307,27 @@ class PlannerService:
         return produced > 0
 
     def _produce_paced(self, now: float) -> bool:
-        """Real-time: keep the buffer ahead of publication by the expected compute time;
-        the pacer thread publishes each batch lead_s before it is due."""
+        """Real-time: keep the buffer ahead of publication by the expected compute time,
+        producing batches until it is (for at most PRODUCE_MAX_S at a time); the pacer
+        thread publishes each batch lead_s before it is due."""
         if now < self._next_poll or self._stopping_done():
             return False
-        ahead = MIN_AHEAD_S + min(MAX_AHEAD_S, 1.5 * self._max_compute_s)
-        if self._buffered_s() >= ahead:
-            self._next_poll = now + self.config.service.batch * self.config.machine.dt
-            return False
+        produced = False
+        start = time.monotonic()
+        while not produced or time.monotonic() - start < PRODUCE_MAX_S:
+            ahead = MIN_AHEAD_S + min(MAX_AHEAD_S, 1.5 * self._max_compute_s)
+            if self._buffered_s() >= ahead:
+                self._next_poll = now + self.config.service.batch * self.config.machine.dt
+                break
+            batch = self._produce_one()
+            if batch is None:
+                self._next_poll = now + self.config.service.batch * self.config.machine.dt
+                break
+            produced = True
+        return produced
+
+    def _produce_one(self) -> SetpointBatch | None:
+        """One batch into the real-time buffer (None if the engine has none now)."""
         t = time.monotonic()
         waits, buffered = self.engine.takeover_waits, self._buffered_s()
         batch = self._next_batch()
@@ -320,19 +338,19 @@ class PlannerService:
         # planners, quiet 2-core machine) once replans took longer than that
         took = time.monotonic() - t
         self._max_compute_s = max(self._max_compute_s, took)
-        if took > buffered + self.pacer.lead_s:
-            # the buffer ran dry while this batch was computed: the machine waits
+        if batch is not None and batch.k0 > 0 and took > buffered + self.pacer.lead_s:
+            # the buffer ran dry while this batch was computed: the machine waits (not
+            # for a job's first batch: the job's clock starts when it is published)
             log.warning("real time: a batch took %.3f s with %.3f s buffered (%s)", took,
                         buffered, "waiting for the replan computed ahead"
                         if self.engine.takeover_waits > waits else "computed at once")
         if batch is None:
-            self._next_poll = now + self.config.service.batch * self.config.machine.dt
-            return False
+            return None
         with self._out_cv:
             self._out.append(batch)
             self._out_samples += batch.n
             self._out_cv.notify_all()
-        return True
+        return batch
 
     def _buffered_s(self) -> float:
         return self._out_samples * self.config.machine.dt
