@@ -31,6 +31,7 @@ import numpy as np
 from lookahead.limits import AxisLimits
 from lookahead.planning.heuristic.levels import FeedLevels
 from lookahead.planning.heuristic.path_limits import BudgetShares, PathGrid, SegmentBudgets
+from lookahead.planning.heuristic.profile_build import build_profile, state_at_s
 from lookahead.planning.heuristic.reach import cubic_time_at
 from lookahead.planning.heuristic.rise import rise_levels
 from lookahead.planning.heuristic.scurve import Phases
@@ -63,27 +64,6 @@ class Valley:
     exit: tuple[float, float]
     #: the exit junction's cap before `raise_valley_caps` (which fills it in)
     cap: float = 0.0
-
-
-def _times(d: np.ndarray, v: float, a: float, j: float, hi: float) -> np.ndarray:
-    """Times t in [0, hi] with v t + a t^2 / 2 + j t^3 / 6 = d (increasing on [0, hi]),
-    elementwise: bisection-safe Newton."""
-    lo_t = np.zeros_like(d)
-    hi_t = np.full_like(d, hi)
-    t = np.clip(d / max(v, 1e-12), 0.0, hi)
-    for _ in range(60):
-        f = ((j / 6.0 * t + a / 2.0) * t + v) * t - d
-        lo_t = np.where(f < 0.0, t, lo_t)
-        hi_t = np.where(f >= 0.0, t, hi_t)
-        fp = (j / 2.0 * t + a) * t + v
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tn = t - f / fp
-        bad = ~((tn >= lo_t) & (tn <= hi_t)) | ~(fp > 0.0)
-        tn = np.where(bad, 0.5 * (lo_t + hi_t), tn)
-        if np.all(np.abs(tn - t) <= 1e-14 * max(hi, 1e-300)):
-            return tn
-        t = tn
-    return t
 
 
 def _time_at(d: float, vm: float, j0: float) -> float:
@@ -201,9 +181,9 @@ def _best(grid: PathGrid, starts: np.ndarray, b: SegmentBudgets, levels: FeedLev
             jmax = np.repeat(grid.jerk_scale[p0:p1], grid.s.shape[1])[:, None] * limits.jmax
             jmax = jmax * shares.headroom
             s0 = float(b.s0[k0])
-            t = _times(grid.s[p0:p1].ravel() - s0, v1, a1, j0, dur * (1 + 1e-9))
-            v = (v1 + a1 * t + j0 * t * t / 2.0)[:, None]
-            a = (a1 + j0 * t)[:, None]
+            ph = Phases(np.array([dur]), np.array([j0]), np.array([a1]), np.array([v1]),
+                        np.array([s0]))
+            v, a = (x[:, None] for x in state_at_s(build_profile(ph), grid.s[p0:p1].ravel())[:2])
             if np.any(np.abs(xs * v) > vmax) or np.any(np.abs(xss * v * v + xs * a) > amax):
                 continue
             if hard is not None and np.any(
@@ -211,8 +191,6 @@ def _best(grid: PathGrid, starts: np.ndarray, b: SegmentBudgets, levels: FeedLev
                 continue
             if np.any(np.abs(xsss * v**3 + 3.0 * xss * v * a + xs * j0) > jmax):
                 continue
-            ph = Phases(np.array([dur]), np.array([j0]), np.array([a1]), np.array([v1]),
-                        np.array([s0]))
             best, best_t = Valley(k0, k1, ph, (v1, a1), (v2, j0 * t2)), dur
         if best is not None:
             return best
