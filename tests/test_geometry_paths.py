@@ -139,3 +139,33 @@ def test_bad_points_raise_naming_the_row(points: np.ndarray, match: str) -> None
 def test_unknown_method() -> None:
     with pytest.raises(ValueError, match="method"):
         fit_points(wavy_points(), SCALE, "quintic")
+
+
+def test_large_evaluations_are_chunked_and_unchanged(monkeypatch):
+    """scipy's PPoly call holds the GIL for its whole call, so a path evaluates at most
+    EVAL_CHUNK points per call (a planning thread must not starve the real-time pacer);
+    the chunked values are the same to the bit."""
+    import numpy as np
+    from scipy.interpolate import PPoly
+
+    from lookahead.geometry import piecewise
+
+    rng = np.random.default_rng(7)
+    x = np.cumsum(rng.uniform(0.5, 2.0, 41))
+    pp = PPoly(rng.normal(size=(4, 40, 3)), x)
+    path = piecewise.PiecewisePath(pp, np.ones(3))
+    u = np.sort(rng.uniform(x[0], x[-1], 5003))
+    whole = (path.eval_u(u), path.eval_u_derivatives(u), path._speed(u))
+    sizes: list[int] = []
+    real_call = PPoly.__call__
+
+    def counting(self, xs, *a, **kw):
+        sizes.append(np.asarray(xs).size)
+        return real_call(self, xs, *a, **kw)
+
+    monkeypatch.setattr(piecewise, "EVAL_CHUNK", 500)
+    monkeypatch.setattr(PPoly, "__call__", counting)
+    chunked = (path.eval_u(u), path.eval_u_derivatives(u), path._speed(u))
+    assert sizes and max(sizes) <= 500
+    assert np.array_equal(whole[0], chunked[0]) and np.array_equal(whole[2], chunked[2])
+    assert all(np.array_equal(a, b) for a, b in zip(whole[1], chunked[1], strict=True))

@@ -80,6 +80,24 @@ def ppoly_from_bspline(spline: BSpline) -> PPoly:
     return PPoly(np.stack(rows), x)
 
 
+#: points per scipy PPoly evaluation. scipy's PPoly.__call__ holds the GIL for its whole
+#: call (about 0.16 us per point and axis-vector on the 2-core machine): one call on a
+#: replan's million quadrature nodes held it for up to 163 ms, so a planning worker thread
+#: kept the service's pacer thread from publishing for longer than its 50 ms lead (real-time
+#: underruns on the 100k-line program). Chunks of this size hold it for about 3 ms; the
+#: values are per point, so chunking changes no bit. Overhead: one call per chunk (~10 us).
+EVAL_CHUNK = 16384
+
+
+def _evaluate(pp: PPoly, u: np.ndarray) -> np.ndarray:
+    """pp(u), a 1-D u in chunks of at most EVAL_CHUNK points (the GIL is released between
+    them)."""
+    u = np.asarray(u)
+    if u.ndim != 1 or u.size <= EVAL_CHUNK:
+        return pp(u)
+    return np.concatenate([pp(u[i:i + EVAL_CHUNK]) for i in range(0, u.size, EVAL_CHUNK)])
+
+
 def _horner_at(c: np.ndarray, h: np.ndarray) -> np.ndarray:
     """Evaluate polynomial coefficient columns c (k+1, n, ...) at local offsets h (n,)."""
     h = h.reshape((-1,) + (1,) * (c.ndim - 2))
@@ -137,10 +155,10 @@ class PiecewisePath(Path):
 
     # --- evaluation -------------------------------------------------------------------
     def _raw(self, u: np.ndarray, order: int) -> list[np.ndarray]:
-        a = [self._numer[j](u) for j in range(order + 1)]
+        a = [_evaluate(self._numer[j], u) for j in range(order + 1)]
         if self._weight is None:
             return a
-        w = [self._weight[j](u).reshape(-1, 1) for j in range(order + 1)]
+        w = [_evaluate(self._weight[j], u).reshape(-1, 1) for j in range(order + 1)]
         return _quotient(a, w)
 
     def eval_u(self, u: np.ndarray, order: int = 3) -> np.ndarray:
@@ -152,14 +170,14 @@ class PiecewisePath(Path):
         (not evaluated at all for a polynomial curve; a rational one needs it)."""
         u = np.clip(np.atleast_1d(np.asarray(u, dtype=float)), *self.u_range)
         if self._weight is None:
-            return [self._numer[j](u) for j in range(1, order + 1)]
+            return [_evaluate(self._numer[j], u) for j in range(1, order + 1)]
         return self._raw(u, order)[1:]
 
     def _speed(self, u: np.ndarray) -> np.ndarray:
         """sigma(u) = ||path_scale * dx/du||."""
         # a polynomial curve needs only dx/du (not x): half the evaluations of the
         # arc-length quadrature and inversion, the same values
-        xu = self._numer[1](u) if self._weight is None else self._raw(u, 1)[1]
+        xu = _evaluate(self._numer[1], u) if self._weight is None else self._raw(u, 1)[1]
         return _row_norms(self.path_scale * xu)
 
     # --- arc length -------------------------------------------------------------------
