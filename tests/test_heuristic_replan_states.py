@@ -62,9 +62,6 @@ def test_replans_from_the_braking_to_rest_at_the_window_end(butterfly_end):
     assert not failed, failed[:3]
 
 
-@pytest.mark.xfail(strict=True, reason="known heuristic failure (open, issue 14): no plan "
-                   "('the start state cannot slow down to the limits within the window'): "
-                   "every brake from the start runs past the corner 7 mm ahead")
 def test_replan_accelerating_into_a_corner_passes_the_checker():
     """Found by bench/replan_continuity.py (stop 25) on a state of the valley heuristic's
     first window of c-corners-bspline-2d, and planned the same way without valleys: from
@@ -73,9 +70,8 @@ def test_replan_accelerating_into_a_corner_passes_the_checker():
     mm long at their time-scaled limits) ran through the corner at s = 180.589, where the
     machine must be at rest: the plan passed it at 46 mm/s, 23x jmax (X jerk 915,091
     mm/s^3 against 40,000, refused by the engine's checker) though the heuristic's grid
-    check passed it. Such brakes are now refused (`planner._crosses_corner`), so the
-    heuristic fails instead of handing out that plan; a brake that stops at the corner is
-    what is missing."""
+    check passed it. Such brakes are refused (`planner._first_corner`); the plan stops at
+    the corner instead (`Brake.stop_at`) and goes on from rest there."""
     p = load_corpus("fast", pattern="c-corners-bspline-2d")[0]
     cfg, m = p.config, p.config.machine
     path = p.path()

@@ -107,6 +107,70 @@ class Brake:
                 return phases, hi
         raise BrakeRefusedError(f"no brake within the limits from v={st.v:.6g}, a={st.a:.6g}")
 
+    def stop_at(self, request: PlanRequest, grid: PathGrid, limits: AxisLimits,
+                s_stop: float) -> tuple[Phases, float]:
+        """A jerk-limited stop from the start state to rest at `s_stop` (a corner that the
+        brakes to a fraction of the feed limit run through) and the scaling g it needed:
+        the gentlest g of `BRAKE_SCALES` whose stop verifies at the grid points before
+        s_stop (at the same limits as `brake`). Raises BrakeRefusedError if none does."""
+        st = request.start
+        ncell = min(max(int(np.searchsorted(grid.edges, s_stop, side="left")), 1),
+                    grid.ncells)
+        check = time_scaled(request.limits,
+                            max(1.0, state_scale(request, grid) * (1 + 1e-6)))
+        for g in BRAKE_SCALES:
+            for shrink in BRAKE_SHRINK:
+                phases = self._stop_at(request, grid, limits, g, shrink, ncell, s_stop)
+                if phases is None:
+                    break  # not at this scaling: a smaller budget does not help
+                if not self._brake_fails(phases, grid, ncell, check):
+                    return phases, g
+        raise BrakeRefusedError(f"no stop at s={s_stop:.6g} within the limits from "
+                                f"v={st.v:.6g}, a={st.a:.6g}")
+
+    def _stop_at(self, request: PlanRequest, grid: PathGrid, limits: AxisLimits, g: float,
+                 shrink: float, ncell: int, s_stop: float) -> Phases | None:
+        """Stop phases to rest at s_stop under `limits` time-scaled by g (budgets times
+        `shrink`, over the first `ncell` cells at a fixed-point bound of the stop's feed
+        in each), or None if the start state does not fit or no forward stop exists."""
+        st = request.start
+        lim = time_scaled(limits, g)
+        sub = first_cells(grid, ncell)
+        feed = np.full(ncell, st.v)
+        for _ in range(16):
+            AJ = self._budgets(sub, feed, lim, shrink, st.a)
+            if AJ is None:
+                return None
+            A, J = AJ
+            # the feed's peak while a positive start acceleration runs out, as the cap
+            V = max(float(np.max(feed)), st.v + max(st.a, 0.0) ** 2 / (2.0 * J)) * (1 + 1e-9)
+            try:
+                phases = self._solver.segment(st.s, s_stop - st.s, st.v, st.a, 0.0, V, A, J)
+            except SegmentInfeasibleError:
+                return None
+            actual = _cell_feed_bound(phases, grid, ncell)
+            if np.all(actual <= feed * (1 + 1e-9)):
+                return phases
+            feed = np.maximum(feed, actual)
+        return None
+
+    def _budgets(self, sub: PathGrid, feed: np.ndarray, lim: AxisLimits, shrink: float,
+                 a0: float) -> tuple[float, float] | None:
+        """The smallest path acceleration and jerk budgets (A, J) over the cells of `sub`
+        at the feed bounds `feed` (one per cell), times `shrink`; A stretched by 1 / margin
+        to admit the start acceleration a0. None if the start does not fit."""
+        nb = BUDGET_FRACTIONS.size
+        ncell = feed.size
+        b = segment_budgets(sub, np.arange(ncell + 1), feed, lim, self.shares)
+        A, J = float(np.min(b.A)), float(np.min(b.J)) * shrink
+        A = max(A * shrink, min(A, abs(a0)))
+        if abs(a0) > A and abs(a0) <= A / self.margin:
+            A = abs(a0)
+        fast = np.any(np.abs(sub.xs[:, :nb]) * feed[:, None, None] > lim.vmax)
+        if fast or abs(a0) > A or not J > 0:
+            return None
+        return A, J
+
     def _brake_at(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
                   limits: AxisLimits, g: float, shrink: float,
                   fraction: float) -> tuple[Phases, int] | None:
@@ -117,20 +181,14 @@ class Brake:
         acceleration (the brake is verified at the unmargined limits)."""
         st = request.start
         lim = time_scaled(limits, g)
-        nb = BUDGET_FRACTIONS.size
         feed = np.array([st.v])  # an upper bound of the brake's feed in each cell
         for _ in range(16):
             ncell = feed.size
-            sub = first_cells(grid, ncell)
             # each cell its own "segment" at its own feed bound, then the smallest budgets
-            b = segment_budgets(sub, np.arange(ncell + 1), feed, lim, self.shares)
-            A, J = float(np.min(b.A)), float(np.min(b.J)) * shrink
-            A = max(A * shrink, min(A, abs(st.a)))
-            if abs(st.a) > A and abs(st.a) <= A / self.margin:
-                A = abs(st.a)
-            fast = np.any(np.abs(sub.xs[:, :nb]) * feed[:, None, None] > lim.vmax)
-            if fast or abs(st.a) > A or not J > 0:
+            AJ = self._budgets(first_cells(grid, ncell), feed, lim, shrink, st.a)
+            if AJ is None:
                 return None
+            A, J = AJ
             target = min(float(np.min(vlim[:ncell])) * fraction, st.v)
             try:
                 phases = self._solver.feed_change(st.s, st.v, st.a, target, A, J)
