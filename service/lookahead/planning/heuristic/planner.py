@@ -308,12 +308,13 @@ class HeuristicPlanner:
                 problem, refused = str(exc), isinstance(exc, BrakeRefusedError)
                 break
             end = phases_end(brake)
-            corner = _first_corner(grid, request.start.s, end.s)
+            # a corner beyond the window's end is the next window's: not this brake's
+            corner = _first_corner(grid, request.start.s, min(end.s, s_end))
             if corner is not None:
                 # the machine must be at rest at a corner: stop there instead, and go on
                 # from rest (c-corners-bspline-2d replan: every brake ran 48-50 mm through
                 # a corner 7 mm ahead)
-                if not corner < s_end or (corner, 0.0, 0.0) in tried:
+                if (corner, 0.0, 0.0) in tried:
                     continue
                 try:
                     brake, g = self._brake.stop_at(request, grid, limits, corner)
