@@ -25,8 +25,12 @@ def slice_profile(profile: FeedProfile, t0: float, t1: float | None = None) -> F
     edges = np.concatenate([[x0 + t0], inner, [x0 + t1]])
     deg = pp.c.shape[0] - 1
     left = edges[:-1]
-    # evaluate just inside each new piece so that a breakpoint uses the piece on its right
-    idx = np.clip(np.searchsorted(pp.x, left, side="right") - 1, 0, pp.c.shape[1] - 1)
+    # each new piece takes the old piece that holds its midpoint: a breakpoint within 1e-12
+    # of t0 is dropped above, and the piece that ends there (a heuristic profile starts with
+    # one 1e-17 s long) must not be stretched over the new piece (it was, by the piece on
+    # the right of `left`: a slice at t = 0 of such a profile broke amax by 1 %)
+    mid = 0.5 * (edges[:-1] + edges[1:])
+    idx = np.clip(np.searchsorted(pp.x, mid, side="right") - 1, 0, pp.c.shape[1] - 1)
     dx = left - pp.x[idx]
     c = np.zeros((deg + 1, left.size))
     for n in range(deg + 1):  # n-th Taylor coefficient of piece idx about dx
