@@ -75,7 +75,7 @@ def run_path(p, method: str, n_states: int, seed: int, mode: str = "seamed",
     first = (planner if source in (None, method) else make_planner(source)).plan(first_request)
     base = CommittedPlan.anchor(path, first, 0, m.dt)
     rng = np.random.default_rng(seed)
-    failures, times = [], []
+    failures, times, handovers = [], [], []
     states = states_on(first.profile, n_states, rng)
     for t, st in states:
         k = round(t / m.dt)
@@ -91,13 +91,23 @@ def run_path(p, method: str, n_states: int, seed: int, mode: str = "seamed",
             planner.plan(first_request)  # its last plan is the one the state lies on
         t0 = time.perf_counter()
         try:
-            plan_checked(planner, request, k, tail, m.limits)
+            plan = plan_checked(planner, request, k, tail, m.limits)
         except (PlanningError, ValueError, RuntimeError, ArithmeticError) as exc:
             failures.append({"k": k, "s": st.s, "v": st.v, "a": st.a,
                              "reason": str(exc)[:300]})
+        else:
+            if plan.handover is not None:
+                handovers.append({"k": k, "s": st.s, "v": st.v, "a": st.a,
+                                  **{key: plan.handover[key] for key in ("t", "share", "whole")},
+                                  "left_mm": request.s_end - st.s})
         times.append(time.perf_counter() - t0)
     ms = np.array(times) * 1e3 if times else np.zeros(1)
     return {"replans": len(times), "failures": len(failures), "examples": failures[:5],
+            "handovers": len(handovers),
+            "handovers_whole": sum(h["whole"] for h in handovers),
+            "handover_share_max": max((h["share"] for h in handovers if not h["whole"]),
+                                      default=0.0),
+            "handover_examples": handovers[:5],
             "replan_ms_p50": float(np.percentile(ms, 50)),
             "replan_ms_p99": float(np.percentile(ms, 99)),
             "first_window": min(path.length, window), "first_duration_s":
@@ -135,6 +145,7 @@ def main() -> int:
             r = row[method]
             print(f"{p.name:44s} {method:10s} " + (
                 f"failures {r['failures']}/{r['replans']}  p99 {r['replan_ms_p99']:.0f} ms"
+                f"  handovers {r['handovers']} (whole {r['handovers_whole']})"
                 if "error" not in r else r["error"]), file=sys.stderr, flush=True)
     for method in args.methods.split(","):
         rows = {n: r[method] for n, r in out["paths"].items() if method in r}
@@ -144,6 +155,10 @@ def main() -> int:
             "paths": len(rows), "paths_with_failures": len(bad),
             "failures": int(sum(r.get("failures", 0) for r in rows.values())),
             "replans": int(sum(r.get("replans", 0) for r in rows.values())),
+            "handovers": int(sum(r.get("handovers", 0) for r in rows.values())),
+            "handovers_whole": int(sum(r.get("handovers_whole", 0) for r in rows.values())),
+            "handover_share_max": max((r.get("handover_share_max", 0.0)
+                                       for r in rows.values()), default=0.0),
             "worst": sorted(bad.items(), key=lambda kv: -1 if kv[1] == "error" else -kv[1]
                             )[:10]}
     FsPath(args.out).write_text(json.dumps(out, indent=1))

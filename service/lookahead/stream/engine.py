@@ -174,6 +174,7 @@ class _Job:
     last_try: int = 0
     last_fail: int = -(10**9)  # sample index of the last failed replan (retry backoff)
     fallbacks_at_start: int = 0  # engine.fallbacks when the job started (job_finished)
+    handovers_at_start: int = 0  # engine.handovers then
     #: the plan in force once it ends at the end of the finished geometry: no replan
     #: extends it (`Engine._maybe_replan`), only a command or a stop replaces it
     settled: CommittedPlan | None = None
@@ -239,6 +240,9 @@ class Engine:
         self.replans = 0
         self.replan_failures = 0
         self.fallbacks = 0
+        #: LP plans whose start the heuristic's transient took (`lp.handover`): not a
+        #: failure, logged at INFO and counted in job_finished
+        self.handovers = 0
         self._last_k = 0
         self._last_job: str | None = None
         self._position: np.ndarray | None = None  # last published sample, None at start-up
@@ -356,6 +360,7 @@ class Engine:
             self._active = job
             job.started = True
             job.fallbacks_at_start = self.fallbacks
+            job.handovers_at_start = self.handovers
             self._job_error = None
             self._emit("job_started", job.id, 0)
         return self._produce(self._active)
@@ -510,6 +515,14 @@ class Engine:
                     "replan failed job=%s k=%d s=%.6g..%.6g: %s", job.id, k_plan,
                     start.s, s_end, outcome.error)
             return False
+        if outcome.plan.handover is not None and not outcome.fell_back:
+            self.handovers += 1
+            h = outcome.plan.handover
+            log.info("%s start handed over job=%s k=%d s=%.6g v=%.6g a=%.6g: the heuristic's "
+                     "transient to s=%.6g (%.1f %% of the plan's time%s); the LP had failed: %s",
+                     self.planner.name, job.id, k_plan, start.s, start.v, start.a, h["s"],
+                     100.0 * h["share"], ", a committed stop" if h["whole"] else "",
+                     h["reason"])
         job.plan = outcome.plan
         job.planned_final = final
         job.force_replan = False
@@ -855,6 +868,7 @@ class Engine:
     def _finish(self, job: _Job, aborted: bool) -> None:
         extra = {"aborted": True} if aborted else {}
         extra["fallbacks"] = self.fallbacks - job.fallbacks_at_start
+        extra["handovers"] = self.handovers - job.handovers_at_start
         self._emit("job_finished", job.id, job.k - 1 if job.k else 0,
                    duration_s=max(job.k - 1, 0) * self.dt, **extra)
         self._drop(job)

@@ -48,13 +48,17 @@ class CommittedPlan:
     #: there, evaluated once for all samples (`FeedProfile.at` is pointwise, so a value does
     #: not depend on the other times evaluated with it)
     states: np.ndarray | None = field(default=None, compare=False, repr=False)
+    #: the LP's start handed over through the heuristic's transient (`lp.handover`: t, s,
+    #: share of the plan's time, whole), else None
+    handover: dict | None = field(default=None, compare=False, repr=False)
 
     @classmethod
     def anchor(cls, path: Path, result: PlanResult, k_plan: int, dt: float) -> CommittedPlan:
         prof = result.profile
         s_end = float(prof.s_of_t(prof.s_of_t.x[-1]))
         k_end = k_plan + max(math.ceil(prof.duration / dt - 1e-9), 0)
-        return cls(path, prof, k_plan, s_end, k_end, result.compute_s, result.method)
+        return cls(path, prof, k_plan, s_end, k_end, result.compute_s, result.method,
+                   handover=result.info.get("handover"))
 
     def times(self, ks: np.ndarray, dt: float) -> np.ndarray:
         return (np.asarray(ks, dtype=float) - self.k_plan) * dt

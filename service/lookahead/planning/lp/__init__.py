@@ -10,6 +10,8 @@ Modules, each importing only the ones above it:
 - `release`: a braking start at low feed released in closed form before the LP.
 - `solve`: the scaled LP and its backends (HiGHS, OSQP).
 - `seam`: where a replan continues the last plan.
+- `handover`: a moving start the LP cannot follow, handed over through the heuristic's
+  transient to a state of zero path acceleration.
 - `planner`: `LPPlanner` (grid, LP passes, relaxation, check/repair loop).
 - `window`: `WindowedLP`, the whole-job driver that plans window by window.
 

@@ -42,7 +42,10 @@ such a repair is first tried at fractions of its tightening within the start zon
 excess grows.
 The sampled check judges every result as always. A moving start or seam that still
 fails goes, in this order, to: a smaller kept head of the last plan, a cold plan from
-the start state, then the caller (the engine's stop planner, counted as a fallback).
+the start state, the start's transient planned by the heuristic up to its first
+zero-acceleration state from which the LP plans (`lp.handover`; a transient that only
+brakes to the window's end is that stop), then the caller (the engine's stop planner,
+counted as a fallback).
 
 Two more causes of failed or slow plans: a jerk pass that leaves a node far below its
 linearization point is re-linearized (RELINEARIZE_RATIO: the tangent pins it near 0,
@@ -55,12 +58,19 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 
 from lookahead.geometry.base import Path
 from lookahead.limits import AxisLimits
-from lookahead.planning.base import FeedProfile, PlanningError, PlanRequest, PlanResult
+from lookahead.planning.base import (
+    FeedProfile,
+    Planner,
+    PlanningError,
+    PlanRequest,
+    PlanResult,
+)
 from lookahead.planning.lp.elastic import elastic_lp
 from lookahead.planning.lp.envelope import (
     braking_distance,
@@ -80,6 +90,7 @@ from lookahead.planning.lp.grid import (
     refine_grid,
     split_near,
 )
+from lookahead.planning.lp.handover import plan_handed_over
 from lookahead.planning.lp.knots import c1_knot_caps, knot_fd_ratio, knot_jumps
 from lookahead.planning.lp.profile import (
     grid_time,
@@ -320,6 +331,10 @@ class LPPlanner:
     time sum h / sqrt(q)) at the pass's linearization point q*, floored at
     OBJECTIVE_FLOOR of its peak; "time-late": "time" only where q* is a jerk solution
     (later passes, repairs), "distance" at the v+a solution (bench/lp_quality.py).
+    handover: a moving start whose plan still fails is handed over through the transient
+    planner's plan to its first zero-acceleration state that the LP plans from
+    (`lp.handover`; off: such a start fails, the caller falls back). transient: that
+    planner (None: the heuristic at the request's limits, made on first use).
     """
 
     name = "lp"
@@ -348,10 +363,14 @@ class LPPlanner:
         objective: str = "distance",
         limit_curve_grid: bool | None = None,
         axis_jerk_change: bool | None = None,
+        handover: bool = True,
+        transient: Planner | None = None,
     ) -> None:
         if objective not in OBJECTIVES:
             raise ValueError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
         self.objective = objective
+        self.handover = handover
+        self.transient = transient
         self.start_relief = start_relief
         self.brake_jerk = brake_jerk
         self.elastic = elastic
@@ -406,8 +425,23 @@ class LPPlanner:
                 except PlanningError:
                     self._last = last
         if result is None:
-            result = self._plan_released(request, fixed_head)
+            try:
+                result = self._plan_released(request, fixed_head)
+            except PlanningError as exc:
+                if not (self.handover and fixed_head is None and request.start.v > REST):
+                    raise
+                result = plan_handed_over(request, self._transient(), partial(
+                    self._plan_released, fixed_head=None), exc)
         return PlanResult(result.profile, self.name, time.perf_counter() - t0, result.info)
+
+    def _transient(self) -> Planner:
+        """The planner of a moving start's transient (`lp.handover`): the heuristic at the
+        request's own limits (as the engine's fallback plans), made on first use."""
+        if self.transient is None:
+            from lookahead.planning.heuristic import HeuristicPlanner
+
+            self.transient = HeuristicPlanner(margin=1.0)
+        return self.transient
 
     def _plan_released(self, request: PlanRequest, fixed_head: np.ndarray | None
                        ) -> PlanResult:

@@ -175,6 +175,13 @@ def profile_from_grid(
             break
         a = secant_accelerations(h, q, a, reverses)
         T, reverses = durations_and_reversals(h, v, a)
+    if reverses[0] and v[0] > 0.0:
+        # the start state's acceleration is fixed (no secant for node 0): a braking start
+        # whose quintic dips below 0 before the next node reverses, and the sampler's hold
+        # makes that a jerk spike the analytic check does not see (w-hoop-R40 from 2.56
+        # mm/s at -324 mm/s^2: 10.6x jmax); the plan is refused (`lp.handover` follows)
+        raise PlanningError(f"lp: the feed reverses after the start (v={v[0]:.6g}, "
+                            f"a={a[0]:.6g}): the grid cannot follow its braking")
     c3, c4, c5 = quintic_coefficients(T, h, v[:-1], a[:-1], v[1:], a[1:])
     coeffs = np.stack([c5, c4, c3, 0.5 * a[:-1], v[:-1], s[:-1]])
     t = np.concatenate([[0.0], np.cumsum(T)])
