@@ -155,3 +155,35 @@ def test_a_hold_during_a_replan_under_way_stops_without_waiting_for_it() -> None
         batches += run_to_end(engine)
     assert engine.fallbacks == 0 and engine.replan_failures == 0
     checked(cfg, batches)
+
+
+def test_an_override_during_an_lp_replan_under_way_is_bridged_at_once() -> None:
+    """An override while the worker's LP replan is blocked: the stop planner plans the new
+    feed at once (a bridge, not a fallback), batches keep coming at the new override
+    without waiting for the worker; once the gate opens the LP's replan computed ahead
+    takes over from the bridge's state, and the job finishes within the limits with no
+    fallback. In fast mode the override is the LP's own plan, made at once."""
+    cfg = default_config()
+    planner = GatedPlanner("lp")
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        engine, batches = run_until_gated(cfg, planner, pool)
+        calls = planner.calls
+        assert engine.command(Command("override", 0.5)).ok
+        for _ in range(30):  # 0.3 s of samples while the LP is still blocked
+            batches.append(engine.next_batch())
+        assert not planner.gate.is_set() and planner.calls == calls
+        assert engine.bridges == 1
+        assert engine.status().override == 0.5
+        planner.gate.set()
+        batches += run_to_end(engine)
+    assert planner.calls > calls + 1  # the blocked replan, then the LP's after the bridge
+    assert engine.fallbacks == 0 and engine.replan_failures == 0
+    checked(cfg, batches)
+    fast = Engine(cfg, make_planner("lp"))
+    for seg in job_segments():
+        fast.submit(seg)
+    for _ in range(50):
+        fast.next_batch()
+    assert fast.command(Command("override", 0.5)).ok
+    run_to_end(fast)
+    assert fast.bridges == 0

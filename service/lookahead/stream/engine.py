@@ -38,7 +38,9 @@ Planning (DESIGN.md "Look-ahead window"): every plan starts in the state of the 
 published sample (s, ds/dt, d2s/dt2 continuous; in real-time mode a replan on time or on new
 geometry starts instead on the plan in force, `stream.ahead.ahead_samples` later, and takes
 over there: the `executor`, the service's worker thread, computes it meanwhile; commands
-and a job's first plan are planned at once) and ends at rest inside final geometry, at
+and a job's first plan are planned at once, an override in real time by the stop planner
+as a bridge from which the configured planner's replan computed ahead takes over,
+`_commit_command`) and ends at rest inside final geometry, at
 min(final length, s + horizon); every plan is checked with the finite-difference checker
 against the published tail before it is committed. If the configured planner fails, the
 stop planner (heuristic) gets the same request (`fallbacks` counts these); if both fail,
@@ -243,6 +245,9 @@ class Engine:
         #: LP plans whose start the heuristic's transient took (`lp.handover`): not a
         #: failure, logged at INFO and counted in job_finished
         self.handovers = 0
+        #: commands planned at once by the stop planner in real time while the configured
+        #: planner's replan is computed ahead (`_commit_command`)
+        self.bridges = 0
         self._last_k = 0
         self._last_job: str | None = None
         self._position: np.ndarray | None = None  # last published sample, None at start-up
@@ -502,6 +507,31 @@ class Engine:
                                      job.tail, self.limits, job.plan)
         return self._adopt(job, outcome, start, s_end, k_plan, job.geo.final_length)
 
+    def _commit_command(self, job: _Job, start: PathState, s_end: float, k_plan: int
+                        ) -> bool:
+        """`_commit` for a command's replan of a moving machine (an override). In real-time
+        mode with a configured planner other than the stop planner (the LP), the stop
+        planner plans it at once (a bridge: the heuristic, tens of ms, where an LP solve can
+        take seconds, longer than the buffer) and the configured planner's replan computed
+        ahead takes over from the bridge (`_replan`; its start is a state of the
+        heuristic's plan, which the LP hands over where it cannot follow it, `lp.handover`).
+        The bridge is not a fallback: the configured planner was not asked."""
+        if not self.realtime or self.planner is self.stop_planner:
+            return self._commit(job, start, s_end, k_plan)
+        if self._ahead_fallback is self.stop_planner:
+            self._planner_free()  # (a worker without its own fallback planner)
+        request = self._request(job, start, s_end)
+        outcome = plan_with_fallback(self.stop_planner, self.stop_planner, request, k_plan,
+                                     job.tail, self.limits, job.plan)
+        if not self._adopt(job, outcome, start, s_end, k_plan, job.geo.final_length):
+            return False
+        self.bridges += 1
+        plan = job.plan
+        assert plan is not None
+        if k_plan < plan.k_end:
+            self._replan(job, plan, k_plan, plan.state(k_plan, self.dt), s_end)
+        return True
+
     def _adopt(self, job: _Job, outcome: PlanOutcome, start: PathState, s_end: float,
                k_plan: int, final: float) -> bool:
         """Put a replan's outcome in force (or count its failure: the old plan stays);
@@ -592,14 +622,15 @@ class Engine:
                     job.last_try = k_last
                     state = plan.state(k_last, self.dt)
                     target = min(geo.final_length, state.s + self.horizon_len)
-                    if target > state.s and self._commit(job, state, target, k_last):
+                    if target > state.s and self._commit_command(job, state, target, k_last):
                         job.stop = None
                 return
         if job.override_pending:
             job.override_pending = False
             state = plan.state(k_last, self.dt)
             target = min(geo.final_length, state.s + self.horizon_len)
-            if target > state.s + self._tol(job) and not self._commit(job, state, target, k_last):
+            if target > state.s + self._tol(job) and not self._commit_command(
+                    job, state, target, k_last):
                 self._begin_stop(job, "override")
                 job.last_try = k_last
             return
@@ -874,10 +905,16 @@ class Engine:
         self._drop(job)
 
     def _forget_plans(self) -> None:
-        """Tell planners that keep their last plan (the LP's seams) that it is void."""
-        self._planner_free()
-        for planner in (self.planner, self.stop_planner, self._ahead_fallback):
-            forget = getattr(planner, "forget", None)
+        """Tell planners that keep their last plan (the LP's seams) that it is void. The
+        worker's planners are told through the executor, after the replan under way and
+        before any later one (it runs its tasks in order), so that a command never waits
+        for the worker here (an override's bridge, `_commit_command`)."""
+        worker = [p for p in (self.planner, self._ahead_fallback)
+                  if callable(getattr(p, "forget", None))]
+        if worker:
+            self._inflight = self.executor.submit(_forget_all, worker)
+        if self.stop_planner not in (self.planner, self._ahead_fallback):
+            forget = getattr(self.stop_planner, "forget", None)
             if callable(forget):
                 forget()
 
@@ -905,6 +942,12 @@ def braking_distance(limits: AxisLimits, path_scale: np.ndarray) -> float:
     a = float(np.min(limits.amax * path_scale))
     j = float(np.min(limits.jmax * path_scale))
     return v * (v / a + a / j) / 2.0 if v >= a * a / j else v * math.sqrt(v / j)
+
+
+def _forget_all(planners: list) -> None:
+    """Each planner's `forget()` (an executor task of `Engine._forget_plans`)."""
+    for planner in planners:
+        planner.forget()
 
 
 def horizon_length(limits: AxisLimits, path_scale: np.ndarray, horizon_s: float) -> float:
