@@ -147,9 +147,6 @@ def _best(grid: PathGrid, starts: np.ndarray, b: SegmentBudgets, levels: FeedLev
     s_m = float(grid.s[apex, 1])
     kappa = float(np.linalg.norm(grid.xss[apex, 1]))
     V = float(b.V[k])
-    naxes = grid.xs.shape[2]
-    amax = limits.amax * shares.headroom
-    vmax = limits.vmax * shares.velocity
     # the apex cell first (a few points, t ~ (s - s_m) / vm there): most candidates that
     # fail, fail there (the tangential residual), and the span search costs more
     ax_s = grid.s[apex] - s_m
@@ -175,26 +172,35 @@ def _best(grid: PathGrid, starts: np.ndarray, b: SegmentBudgets, levels: FeedLev
             if not (dur < best_t and dur < cruise):
                 continue
             a1 = -j0 * t1
-            p0, p1 = int(starts[k0]), int(starts[k1 + 1])
-            xs, xss, xsss = (x[p0:p1].reshape(-1, naxes) for x in (grid.xs, grid.xss,
-                                                                    grid.xsss))
-            jmax = np.repeat(grid.jerk_scale[p0:p1], grid.s.shape[1])[:, None] * limits.jmax
-            jmax = jmax * shares.headroom
-            s0 = float(b.s0[k0])
             ph = Phases(np.array([dur]), np.array([j0]), np.array([a1]), np.array([v1]),
-                        np.array([s0]))
-            v, a = (x[:, None] for x in state_at_s(build_profile(ph), grid.s[p0:p1].ravel())[:2])
-            if np.any(np.abs(xs * v) > vmax) or np.any(np.abs(xss * v * v + xs * a) > amax):
-                continue
-            if hard is not None and np.any(
-                    v[:, 0] > np.repeat(hard[p0:p1], grid.s.shape[1])):
-                continue
-            if np.any(np.abs(xsss * v**3 + 3.0 * xss * v * a + xs * j0) > jmax):
+                        np.array([float(b.s0[k0])]))
+            if not _within_limits(grid, int(starts[k0]), int(starts[k1 + 1]), ph, limits,
+                                  shares, hard):
                 continue
             best, best_t = Valley(k0, k1, ph, (v1, a1), (v2, j0 * t2)), dur
         if best is not None:
             return best
     return None
+
+
+def _within_limits(grid: PathGrid, p0: int, p1: int, ph: Phases, limits: AxisLimits,
+                   shares: BudgetShares, hard: np.ndarray | None) -> bool:
+    """True if the one-phase motion `ph` keeps the signed axis velocity, acceleration and
+    jerk within the limits (the budgets' velocity share and headroom; the jerk scaled
+    next to C1 knots) at every grid point of cells p0 .. p1 - 1, and its feed within
+    `hard` (per cell: feed cap, C1-knot caps; None: no such bound) there."""
+    naxes = grid.xs.shape[2]
+    xs, xss, xsss = (x[p0:p1].reshape(-1, naxes) for x in (grid.xs, grid.xss, grid.xsss))
+    jmax = np.repeat(grid.jerk_scale[p0:p1], grid.s.shape[1])[:, None] * limits.jmax
+    jmax = jmax * shares.headroom
+    v, a = (x[:, None] for x in state_at_s(build_profile(ph), grid.s[p0:p1].ravel())[:2])
+    if np.any(np.abs(xs * v) > limits.vmax * shares.velocity) or \
+            np.any(np.abs(xss * v * v + xs * a) > limits.amax * shares.headroom):
+        return False
+    if hard is not None and np.any(v[:, 0] > np.repeat(hard[p0:p1], grid.s.shape[1])):
+        return False
+    return not np.any(np.abs(xsss * v**3 + 3.0 * xss * v * a + xs * float(ph.jerk[0]))
+                      > jmax)
 
 
 def _end_ok(b: SegmentBudgets, levels: FeedLevels, J: np.ndarray, nb: int, v: float,
