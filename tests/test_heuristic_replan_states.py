@@ -11,7 +11,10 @@ import numpy as np
 import pytest
 from bench.corpus import load_corpus
 
+from lookahead.checker import check_positions
 from lookahead.planning.base import PathState, PlanningError, PlanRequest
+from lookahead.planning.heuristic import HeuristicPlanner
+from lookahead.sampling import sample_plan
 from lookahead.stream.engine import horizon_length
 from lookahead.stream.planners import make_planner
 from lookahead.stream.plans import CommittedPlan, plan_checked
@@ -84,3 +87,78 @@ def test_replan_accelerating_into_a_corner_passes_the_checker():
         plan_checked(make_planner("heuristic"), request, 0, np.empty((0, 2)), m.limits)
     except PlanningError as exc:
         pytest.fail(str(exc))
+
+
+#: every how many samples of the dome's valley motions a replan starts (a compute bound:
+#: ~0.15 s a replan; the valleys of the first window span 416 samples)
+VALLEY_STRIDE = 8
+
+
+@pytest.fixture(scope="module")
+def dome_first_window():
+    """(corpus path, geometry path, limits, window, feed cap, committed first plan, the
+    samples of the first plan whose feed lies above the feed limit where they are: inside
+    a valley motion, `heuristic.valley`)."""
+    p = load_corpus("fast", pattern="w-polar-dome-*")[0]
+    cfg, m = p.config, p.config.machine
+    path = p.path()
+    cap = p.geometry().feed_cap()
+    lim = m.limits.scaled(cfg.planner.margin)
+    window = horizon_length(lim, np.asarray(m.path_scale, float), cfg.planner.horizon_s)
+    request = PlanRequest(path, lim, PathState(0.0), min(path.length, window), 0.0, cap,
+                          m.dt)
+    first = make_planner("heuristic").plan(request)
+    base = CommittedPlan.anchor(path, first, 0, m.dt)
+    grid, vlim = HeuristicPlanner(margin=1.0)._grid(request, request.start, lim)
+    ks = np.arange(int(first.profile.duration / m.dt))
+    s, v = np.array([[base.state(int(k), m.dt).s, base.state(int(k), m.dt).v] for k in ks]).T
+    cell = np.clip(np.searchsorted(grid.edges, s) - 1, 0, grid.ncells - 1)
+    return p, path, lim, window, cap, base, ks[v > vlim[cell]]
+
+
+def test_replans_from_inside_a_valley_above_the_caps(dome_first_window):
+    """Found by bench/replan_continuity.py (stop 26) on the polar dome: a replan from a
+    state inside a valley motion of the heuristic's own first window (feed above the
+    caps, decelerating into the bend) was refused ("no brake within the limits from
+    v=105.05, a=-563.033"; here 19 of the 52 samples, all in the first valley, from
+    its descent to just past its apex): such a start was only ever braked, and no brake
+    fits the limits there. The plan now continues the valley from the start
+    (`valley.start_valley`). Every VALLEY_STRIDE-th sample above the caps is a start the
+    heuristic replans from, and the engine's check accepts it."""
+    p, path, lim, window, cap, base, ks = dome_first_window
+    m = p.config.machine
+    assert ks.size > 100  # the valleys are sampled
+    failed = []
+    planner = make_planner("heuristic")
+    for k in ks[::VALLEY_STRIDE].tolist():
+        st = base.state(k, m.dt)
+        tail = base.samples(max(k - 2, 0), min(k, 2) + 1, m.dt).pos
+        request = PlanRequest(path, lim, st, min(path.length, st.s + window), 0.0, cap,
+                              m.dt)
+        try:
+            plan_checked(planner, request, k, tail, m.limits)
+        except (PlanningError, ValueError, RuntimeError, ArithmeticError) as exc:
+            failed.append((k, st, str(exc)[:120]))
+    assert not failed, (len(failed), failed[:3])
+
+
+@pytest.mark.parametrize("start", [
+    PathState(142.06645804913333, 105.04978263889089, -563.0332576676653),
+    PathState(145.44643150781025, 89.4655274751399, -327.49560883239303)])
+def test_replan_decelerating_inside_a_valley_passes_the_checker(start):
+    """The two refused states of bench/replan_continuity.py on w-polar-dome-R30-a5-0p5mm
+    (seed 1: samples 610 and 645 of the first window, 1.3-1.4x the feed limits of 81 and
+    62 mm/s there), planned one window on: a verified plan that continues the valley (no
+    brake first), its sampled stream within the checker's limits."""
+    p = load_corpus("fast", pattern="w-polar-dome-*")[0]
+    cfg, m = p.config, p.config.machine
+    path = p.path()
+    lim = m.limits.scaled(cfg.planner.margin)
+    window = horizon_length(lim, np.asarray(m.path_scale, float), cfg.planner.horizon_s)
+    request = PlanRequest(path, lim, start, min(path.length, start.s + window), 0.0,
+                          p.geometry().feed_cap(), m.dt)
+    result = make_planner("heuristic").plan(request)
+    assert result.info["verified"] and "brake_scale" not in result.info
+    assert result.info.get("valley_segments", 0) > 0
+    report = check_positions(sample_plan(path, result.profile, m.dt).pos, m.limits, m.dt)
+    assert report.ok, report.first

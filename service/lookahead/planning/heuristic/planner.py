@@ -19,7 +19,9 @@ repaired, on several layouts of planning segments (the fastest verified plan win
    (`verify`); failing segments get their V, A, J lowered and steps 2-4 repeat. A profile
    that still fails raises PlanningError (never an unverified profile).
 5. A start above the limits (override down, lower feed cap): first a brake (`brake`), then
-   steps 1-4 from where it ends.
+   steps 1-4 from where it ends. A start above the feed limit but within the axis limits
+   that no brake plans (inside a valley motion of the last plan): steps 1-4 from it, the
+   valley continued from the start (`valley.start_valley`).
 """
 
 from __future__ import annotations
@@ -354,8 +356,8 @@ class HeuristicPlanner:
             info = {"brake_scale": g, "brake_target": fraction, **core}
             return self._result(build_profile(concat_phases([brake, phases])), t_start, info)
         if request.start.v > vlim[0] / self.margin and \
-                not request.start.v > self._start_limit(request, grid, vlim, limits) / self.margin:
-            # above the default shares' limit only: a wider layout's plan may go on from it
+                self._may_go_on(request, grid, vlim, limits):
+            # a wider layout's plan, or a valley motion from the start, may go on from it
             try:
                 phases, core = self._plan_phases(request, grid, vlim, limits)
                 return self._result(build_profile(phases), t_start, core)
@@ -423,6 +425,21 @@ class HeuristicPlanner:
             self._last_layout = i
             return phases, {**info, "layout": i}
         raise PlanningError(problem)
+
+    def _may_go_on(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
+                   limits: AxisLimits) -> bool:
+        """Whether a start above the window's feed limit at the start (the default
+        shares') is planned directly where no brake planned it: below the most
+        permissive layout's feed limit (`_start_limit`), or within the axis velocity and
+        acceleration limits (`brake.state_scale` <= 1), as inside a valley motion of the
+        last plan, above the caps: the plan then continues it (`valley.start_valley`;
+        polar dome, from inside its first valley: v = 82-108 mm/s against feed limits
+        of 52-86 there, decelerating at up to 600 mm/s^2; every brake failed its check
+        or found no scaling that admits the start)."""
+        if state_scale(request, grid) <= 1.0:
+            return True
+        return not request.start.v > self._start_limit(request, grid, vlim,
+                                                       limits) / self.margin
 
     def _start_limit(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
                      limits: AxisLimits) -> float:
@@ -609,8 +626,9 @@ class HeuristicPlanner:
             hard = grid.c1_cap
             if request.feed_cap is not None:
                 hard = np.minimum(hard, request.feed_cap.at(grid.s[:, 1]))
+            st = request.start
             valleys = find_valleys(grid, starts, b, levels, vlim, cap, limits, shares,
-                                   neighbour_min(b.J), ban, hard)
+                                   neighbour_min(b.J), ban, hard, (st.v, st.a))
             for _ in range(VALLEY_CHAINS):
                 if not valleys:
                     break
