@@ -110,6 +110,10 @@ class AheadRecorder:
         self.rows: list[tuple[float, float]] = []
 
     def submit(self, fn, /, *args, **kwargs):
+        from lookahead.stream.ahead import plan_with_fallback
+
+        if fn is not plan_with_fallback:  # the engine's other tasks (planners' forget)
+            return self.inline.submit(fn, *args, **kwargs)
         k_at = args[3]  # plan_with_fallback(planner, fallback, request, k_at, ...)
         t0 = time.perf_counter()
         future = self.inline.submit(fn, *args, **kwargs)

@@ -248,6 +248,9 @@ class Engine:
         #: commands planned at once by the stop planner in real time while the configured
         #: planner's replan is computed ahead (`_commit_command`)
         self.bridges = 0
+        #: bridge overrides in real time (`_commit_command`); off: the configured planner
+        #: plans them at once, as before (bench/override_latency.py's A/B partner)
+        self.bridge_overrides = True
         self._last_k = 0
         self._last_job: str | None = None
         self._position: np.ndarray | None = None  # last published sample, None at start-up
@@ -516,7 +519,7 @@ class Engine:
         ahead takes over from the bridge (`_replan`; its start is a state of the
         heuristic's plan, which the LP hands over where it cannot follow it, `lp.handover`).
         The bridge is not a fallback: the configured planner was not asked."""
-        if not self.realtime or self.planner is self.stop_planner:
+        if not (self.realtime and self.bridge_overrides) or self.planner is self.stop_planner:
             return self._commit(job, start, s_end, k_plan)
         if self._ahead_fallback is self.stop_planner:
             self._planner_free()  # (a worker without its own fallback planner)
