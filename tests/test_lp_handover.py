@@ -34,11 +34,14 @@ def test_zero_acceleration_times_are_the_transients_ends():
 
 
 def test_a_brake_to_rest_is_a_committed_stop_and_a_dip_is_not():
-    """v = 1 - t^2 on [0, 1] only falls and ends at rest; v = 1 - t + t^2 rises again."""
+    """v = 1 - t^2 on [0, 1] only falls and ends at rest; v = 1 - t + t^2 / 2 on [0, 2]
+    falls to 0.5 at t = 1 and rises again; a brake that stops short of rest is not one."""
     stop = _profile([[-1.0 / 3.0], [0.0], [1.0], [0.0]], [0.0, 1.0])
-    dip = _profile([[1.0 / 3.0], [-0.5], [1.0], [0.0]], [0.0, 1.0])
+    dip = _profile([[1.0 / 6.0], [-0.5], [1.0], [0.0]], [0.0, 2.0])
+    short = _profile([[-1.0 / 3.0], [0.0], [1.0], [0.0]], [0.0, 0.9])
     assert is_committed_stop(stop)
     assert not is_committed_stop(dip)
+    assert not is_committed_stop(short)
 
 
 @pytest.fixture(scope="module")

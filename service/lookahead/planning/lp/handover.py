@@ -48,9 +48,9 @@ MAX_HANDOVERS = 3
 #: a zero of the acceleration closer than this to either end of the transient is its end
 #: state, not a handover (s; below the 1 ms sample time by 1e3)
 EDGE_S = 1e-6
-#: a transient whose feed rises by more than this fraction of its start feed (or 1e-9 of
-#: its peak) anywhere is not a committed stop
-RISE_TOL = 1e-9
+#: a committed stop ends with a feed below this fraction of its start feed (at least of
+#: 1 path unit / s): at rest, to rounding
+REST_TOL = 1e-9
 
 
 def zero_acceleration_times(profile: FeedProfile) -> np.ndarray:
@@ -62,12 +62,14 @@ def zero_acceleration_times(profile: FeedProfile) -> np.ndarray:
     return t[(t > EDGE_S) & (t < profile.duration - EDGE_S)]
 
 
-def is_committed_stop(profile: FeedProfile, samples: int = 257) -> bool:
-    """True if the profile's feed never rises (within RISE_TOL) and it ends at rest."""
-    t = np.linspace(0.0, profile.duration, samples)
-    v = profile.at(t)[1]
-    tol = RISE_TOL * max(float(np.max(np.abs(v))), 1.0)
-    return bool(np.all(np.diff(v) <= tol)) and abs(float(v[-1])) <= tol
+def is_committed_stop(profile: FeedProfile) -> bool:
+    """True if the profile brakes all the way to rest: its path acceleration has no zero
+    inside it (it is continuous, so it keeps one sign), that sign is negative, and the feed
+    at its end is 0 (to REST_TOL of the start feed)."""
+    if zero_acceleration_times(profile).size:
+        return False
+    _, v, a, _ = profile.at(np.array([0.0, 0.5 * profile.duration, profile.duration]))
+    return bool(a[1] < 0.0 and abs(v[2]) <= REST_TOL * max(abs(float(v[0])), 1.0))
 
 
 def plan_handed_over(request: PlanRequest, transient: Planner,
