@@ -98,7 +98,8 @@ def run_path(p, method: str, n_states: int, seed: int, mode: str = "seamed",
         else:
             if plan.handover is not None:
                 handovers.append({"k": k, "s": st.s, "v": st.v, "a": st.a,
-                                  **{key: plan.handover[key] for key in ("t", "share", "whole")},
+                                  **{key: plan.handover.get(key)
+                                     for key in ("t", "share", "whole", "attempt")},
                                   "left_mm": request.s_end - st.s})
         times.append(time.perf_counter() - t0)
     ms = np.array(times) * 1e3 if times else np.zeros(1)
@@ -107,6 +108,8 @@ def run_path(p, method: str, n_states: int, seed: int, mode: str = "seamed",
             "handovers_whole": sum(h["whole"] for h in handovers),
             "handover_share_max": max((h["share"] for h in handovers if not h["whole"]),
                                       default=0.0),
+            "handover_attempt_max": max((h["attempt"] for h in handovers
+                                         if h["attempt"] is not None), default=None),
             "handover_examples": handovers[:5],
             "replan_ms_p50": float(np.percentile(ms, 50)),
             "replan_ms_p99": float(np.percentile(ms, 99)),
@@ -159,6 +162,9 @@ def main() -> int:
             "handovers_whole": int(sum(r.get("handovers_whole", 0) for r in rows.values())),
             "handover_share_max": max((r.get("handover_share_max", 0.0)
                                        for r in rows.values()), default=0.0),
+            "handover_attempt_max": max((r["handover_attempt_max"] for r in rows.values()
+                                         if r.get("handover_attempt_max") is not None),
+                                        default=None),
             "worst": sorted(bad.items(), key=lambda kv: -1 if kv[1] == "error" else -kv[1]
                             )[:10]}
     FsPath(args.out).write_text(json.dumps(out, indent=1))

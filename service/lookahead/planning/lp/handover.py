@@ -78,13 +78,14 @@ def plan_handed_over(request: PlanRequest, transient: Planner,
     """The request planned as the transient's head to its earliest zero-acceleration state
     whose LP (`plan_lp`) plans, then that LP plan; the transient whole if it is a committed
     stop; else `error` (the LP's failure from the start) is raised. info["handover"] says
-    where (t, s, the share of the plan's time the transient took, `whole`) and why."""
+    where (t, s, the share of the plan's time the transient took, `whole`, which state
+    `attempt` planned, from 0) and why."""
     try:
         head = transient.plan(request)
     except PlanningError:
         raise error from None
     reason = str(error)
-    for t in zero_acceleration_times(head.profile)[:MAX_HANDOVERS]:
+    for attempt, t in enumerate(zero_acceleration_times(head.profile)[:MAX_HANDOVERS]):
         state = head.profile.state_at(float(t))
         if not request.start.s < state.s < request.s_end:
             continue
@@ -96,11 +97,12 @@ def plan_handed_over(request: PlanRequest, transient: Planner,
         info = dict(rest.info)
         info["handover"] = {"t": float(t), "s": state.s, "v": state.v,
                             "share": float(t) / profile.duration, "whole": False,
-                            "reason": reason}
+                            "attempt": attempt, "reason": reason}
         return PlanResult(profile, rest.method, 0.0, info)
     if is_committed_stop(head.profile) and request.v_end == 0.0:
         info = {"verified": head.info.get("verified", True),
                 "handover": {"t": head.profile.duration, "s": request.s_end, "v": 0.0,
-                             "share": 1.0, "whole": True, "reason": reason}}
+                             "share": 1.0, "whole": True, "attempt": None,
+                             "reason": reason}}
         return PlanResult(head.profile, "lp", 0.0, info)
     raise error
