@@ -184,3 +184,35 @@ def test_windowed_engine_on_issue_paths_makes_no_fallback(name, points):
     assert check_positions(pos, cfg.machine.limits, cfg.machine.dt).ok
     assert engine.fallbacks == 0
     assert [e.extra["fallbacks"] for e in events if e.type == "job_finished"] == [0]
+
+
+class HandingOverPlanner:
+    """The heuristic, named like the LP, whose every plan says that its start was handed
+    over (`lp.handover`'s info), as an LP plan whose transient the heuristic made."""
+
+    name = "lp"
+
+    def __init__(self) -> None:
+        self.inner = make_planner("heuristic")
+
+    def plan(self, request):
+        result = self.inner.plan(request)
+        info = {**result.info, "handover": {"t": 0.01, "s": request.start.s + 1.0, "v": 1.0,
+                                            "share": 0.01, "whole": False, "attempt": 0,
+                                            "reason": "lp: test"}}
+        return type(result)(result.profile, "lp", result.compute_s, info)
+
+
+def test_handovers_are_counted_in_job_finished_and_logged_not_as_fallbacks(caplog):
+    """A plan whose start was handed over is not a fallback: counted apart
+    (`Engine.handovers`, `job_finished.handovers`), logged at INFO with the place and the
+    LP's reason."""
+    cfg = default_config()
+    engine = Engine(cfg, HandingOverPlanner())
+    with caplog.at_level(logging.INFO, logger="lookahead.engine"):
+        _, events = _run(engine, _segments("ho", _small_job()))
+    finished = [e for e in events if e.type == "job_finished"]
+    assert engine.handovers == engine.replans > 0 and engine.fallbacks == 0
+    assert Event.decode(finished[0].encode()).extra["handovers"] == engine.handovers
+    logged = [r.getMessage() for r in caplog.records if "handed over" in r.getMessage()]
+    assert len(logged) == engine.handovers and "lp: test" in logged[0]
