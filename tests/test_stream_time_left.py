@@ -123,16 +123,18 @@ def test_override_hold_and_resume_are_recomputed_and_holds_not_counted(cfg, plan
                                                                         realtime):
     """A job planned to its end from ~0.8 s on (real time ~1.6 s: replans take over ahead
     of the last sample); commands before calls 100 (real time 180; override 0.6: slower),
-    160 (220; hold), 300 (resume) and 360 (override 1.0: faster again): false/None from
-    each command until the plan is remade, then one predicted end until the next command,
-    the true end after the last. Real time: the hold's rest samples count as job time once
-    they are published, never before."""
+    160 (280; hold), 300 (360; resume) and 360 (420; override 1.0: faster again):
+    false/None from each command until the plan is remade, then one predicted end until
+    the next command, the true end after the last. Real time: an override's end is known
+    once the LP's replan computed ahead takes over from the bridge (`_commit_command`,
+    ~0.7 s later here, call 253 for the override at 180); the hold's rest samples count as
+    job time once they are published, never before."""
     engine = Engine(cfg, make_planner(planner), realtime=realtime)
     for seg in segments("cmds", long_points(300, strokes=1)):
         engine.submit(seg)
-    first, hold = (180, 220) if realtime else (100, 160)
+    first, hold, resume, faster = (180, 280, 360, 420) if realtime else (100, 160, 300, 360)
     script = {first: [Command("override", 0.6)], hold: [Command("hold")],
-              300: [Command("resume")], 360: [Command("override", 1.0)]}
+              resume: [Command("resume")], faster: [Command("override", 1.0)]}
     batches, pairs = run(engine, script)
     dt = cfg.machine.dt
     k_final = last_k(batches)
@@ -149,7 +151,7 @@ def test_override_hold_and_resume_are_recomputed_and_holds_not_counted(cfg, plan
     ends = predicted_ends(pairs, dt)
     marks = [0, *sorted(script), 10**9]
     spans = [{e for i, e in ends if lo <= i < hi} for lo, hi in itertools.pairwise(marks)]
-    # exactly one predicted end between two commands but while holding (160..300)
+    # exactly one predicted end between two commands but while holding (hold..resume)
     assert [len(span) for span in spans] == [1, 1, 0, 1, 1], spans
     (full, slow, _, resumed, final) = (min(span, default=None) for span in spans)
     assert final == k_final
