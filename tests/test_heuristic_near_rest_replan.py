@@ -7,34 +7,22 @@ it covers only a short leading cell (`path_limits.lead_length`)."""
 
 from __future__ import annotations
 
-import numpy as np
-import pytest
-from bench.corpus import load_corpus
+from dataclasses import replace
 
-from lookahead.planning.base import PathState, PlanRequest
+import pytest
+
+from corpus_windows import FirstWindow, first_window
+from lookahead.planning.base import PathState
 from lookahead.planning.heuristic.path_limits import lead_length
-from lookahead.stream.engine import horizon_length
 from lookahead.stream.planners import make_planner
-from lookahead.stream.plans import CommittedPlan
 
 #: samples at the end of the first plan replanned from (its brake to rest), every STEP-th
 END_SAMPLES, STEP = 120, 8
 
 
 @pytest.fixture(scope="module")
-def cam_braking():
-    """(path, limits, window, feed cap, dt, committed first plan, its sample count)."""
-    p = load_corpus("fast", pattern="cam-style-R50-a45-L200")[0]
-    cfg, m = p.config, p.config.machine
-    path = p.path()
-    cap = p.geometry().feed_cap()
-    lim = m.limits.scaled(cfg.planner.margin)
-    window = horizon_length(lim, np.asarray(m.path_scale, float), cfg.planner.horizon_s)
-    request = PlanRequest(path, lim, PathState(0.0), min(path.length, window), 0.0, cap,
-                          m.dt)
-    first = make_planner("heuristic").plan(request)
-    n = int(first.profile.duration / m.dt)
-    return path, lim, window, cap, m.dt, CommittedPlan.anchor(path, first, 0, m.dt), n
+def cam_braking() -> FirstWindow:
+    return first_window("cam-style-R50-a45-L200")
 
 
 def test_replans_from_the_brake_to_rest_do_not_crawl(cam_braking):
@@ -42,18 +30,18 @@ def test_replans_from_the_brake_to_rest_do_not_crawl(cam_braking):
     than finishing that brake and planning on from rest at its end (a plan the heuristic
     could always make); before the leading cell, 123 s instead of 4.3 from v0 = 0.46 and
     22 % longer from the mid-brake states (v0 ~ 70 mm/s, a0 ~ -1700 mm/s^2)."""
-    path, lim, window, cap, dt, base, n = cam_braking
-    end = base.state(n, dt)
-    rest = make_planner("heuristic").plan(
-        PlanRequest(path, lim, PathState(end.s), min(path.length, end.s + window), 0.0,
-                    cap, dt)).profile.duration
+    first = cam_braking
+    n, dt = first.samples, first.dt
+    at_rest, _ = first.replan(n)
+    rest = make_planner("heuristic").plan(replace(
+        at_rest, start=PathState(at_rest.start.s))).profile.duration
     slow, braking = [], 0
     for k in range(n - END_SAMPLES, n - 1, STEP):
-        st = base.state(k, dt)
+        request, _ = first.replan(k)
+        st = request.start
         if not (st.v > 0.0 and st.a < 0.0):
             continue
         braking += 1
-        request = PlanRequest(path, lim, st, min(path.length, st.s + window), 0.0, cap, dt)
         got = make_planner("heuristic").plan(request).profile.duration
         bound = (n - k) * dt + rest
         if got > 1.1 * bound:

@@ -11,56 +11,44 @@ import numpy as np
 import pytest
 from bench.corpus import load_corpus
 
+from corpus_windows import FirstWindow, first_window
 from lookahead.checker import check_positions
 from lookahead.planning.base import PathState, PlanningError, PlanRequest
 from lookahead.planning.heuristic import HeuristicPlanner
 from lookahead.sampling import sample_plan
 from lookahead.stream.engine import horizon_length
 from lookahead.stream.planners import make_planner
-from lookahead.stream.plans import CommittedPlan, plan_checked
+from lookahead.stream.plans import plan_checked
 
 #: share of the first plan's duration at its end replanned from (its braking to rest)
 END_SHARE = 0.02
 
 
 @pytest.fixture(scope="module")
-def butterfly_end():
-    """(corpus path, geometry path, limits, window, feed cap, committed first plan, the
-    sample indices of the braking at its end)."""
-    p = load_corpus("fast", pattern="n-butterfly")[0]
-    cfg, m = p.config, p.config.machine
-    path = p.path()
-    cap = p.geometry().feed_cap()
-    lim = m.limits.scaled(cfg.planner.margin)
-    window = horizon_length(lim, np.asarray(m.path_scale, float), cfg.planner.horizon_s)
-    request = PlanRequest(path, lim, PathState(0.0), min(path.length, window), 0.0, cap,
-                          m.dt)
-    first = make_planner("heuristic").plan(request)
-    base = CommittedPlan.anchor(path, first, 0, m.dt)
-    n = int(first.profile.duration / m.dt)
-    ks = np.arange(int((1.0 - END_SHARE) * n), n - 1)
-    return p, path, lim, window, cap, base, ks
+def butterfly_end() -> tuple[FirstWindow, np.ndarray]:
+    """The butterfly's first window and the sample indices of the braking at its end."""
+    first = first_window("n-butterfly")
+    n = first.samples
+    return first, np.arange(int((1.0 - END_SHARE) * n), n - 1)
 
 
 def test_replans_from_the_braking_to_rest_at_the_window_end(butterfly_end):
     """Every sample of the first plan's braking to rest (it ends the path) is a start the
     heuristic replans from, and the engine's check (continuity with the samples already
     published, the independent checker at the limits) accepts the replan."""
-    p, path, lim, window, cap, base, ks = butterfly_end
-    m = p.config.machine
+    first, ks = butterfly_end
+    limits = first.corpus.config.machine.limits
     failed, moving = [], 0
-    for k in ks:
-        st = base.state(int(k), m.dt)
-        if st.s >= path.length - 1e-9 * path.length:
+    for k in ks.tolist():
+        request, tail = first.replan(k)
+        st = request.start
+        if st.s >= first.path.length - 1e-9 * first.path.length:
             continue
         moving += st.v > 0
-        tail = base.samples(max(int(k) - 2, 0), min(int(k), 2) + 1, m.dt).pos
-        request = PlanRequest(path, lim, st, min(path.length, st.s + window), 0.0, cap,
-                              m.dt)
         try:
-            plan_checked(make_planner("heuristic"), request, int(k), tail, m.limits)
+            plan_checked(make_planner("heuristic"), request, k, tail, limits)
         except (PlanningError, ValueError, RuntimeError, ArithmeticError) as exc:
-            failed.append((int(k), st, str(exc)[:120]))
+            failed.append((k, st, str(exc)[:120]))
     assert moving > 50  # the braking is sampled, not just the rest at its end
     assert not failed, failed[:3]
 
@@ -95,25 +83,17 @@ VALLEY_STRIDE = 8
 
 
 @pytest.fixture(scope="module")
-def dome_first_window():
-    """(corpus path, geometry path, limits, window, feed cap, committed first plan, the
-    samples of the first plan whose feed lies above the feed limit where they are: inside
-    a valley motion, `heuristic.valley`)."""
-    p = load_corpus("fast", pattern="w-polar-dome-*")[0]
-    cfg, m = p.config, p.config.machine
-    path = p.path()
-    cap = p.geometry().feed_cap()
-    lim = m.limits.scaled(cfg.planner.margin)
-    window = horizon_length(lim, np.asarray(m.path_scale, float), cfg.planner.horizon_s)
-    request = PlanRequest(path, lim, PathState(0.0), min(path.length, window), 0.0, cap,
-                          m.dt)
-    first = make_planner("heuristic").plan(request)
-    base = CommittedPlan.anchor(path, first, 0, m.dt)
-    grid, vlim = HeuristicPlanner(margin=1.0)._grid(request, request.start, lim)
-    ks = np.arange(int(first.profile.duration / m.dt))
-    s, v = np.array([[base.state(int(k), m.dt).s, base.state(int(k), m.dt).v] for k in ks]).T
+def dome_first_window() -> tuple[FirstWindow, np.ndarray]:
+    """The polar dome's first window and the samples of its plan whose feed lies above the
+    feed limit where they are: inside a valley motion (`heuristic.valley`)."""
+    first = first_window("w-polar-dome-*")
+    grid, vlim = HeuristicPlanner(margin=1.0)._grid(first.request, first.request.start,
+                                                    first.limits)
+    ks = np.arange(first.samples)
+    s, v = np.array([[first.plan.state(int(k), first.dt).s,
+                      first.plan.state(int(k), first.dt).v] for k in ks]).T
     cell = np.clip(np.searchsorted(grid.edges, s) - 1, 0, grid.ncells - 1)
-    return p, path, lim, window, cap, base, ks[v > vlim[cell]]
+    return first, ks[v > vlim[cell]]
 
 
 def test_replans_from_inside_a_valley_above_the_caps(dome_first_window):
@@ -125,20 +105,16 @@ def test_replans_from_inside_a_valley_above_the_caps(dome_first_window):
     fits the limits there. The plan now continues the valley from the start
     (`valley.start_valley`). Every VALLEY_STRIDE-th sample above the caps is a start the
     heuristic replans from, and the engine's check accepts it."""
-    p, path, lim, window, cap, base, ks = dome_first_window
-    m = p.config.machine
+    first, ks = dome_first_window
     assert ks.size > 100  # the valleys are sampled
     failed = []
     planner = make_planner("heuristic")
     for k in ks[::VALLEY_STRIDE].tolist():
-        st = base.state(k, m.dt)
-        tail = base.samples(max(k - 2, 0), min(k, 2) + 1, m.dt).pos
-        request = PlanRequest(path, lim, st, min(path.length, st.s + window), 0.0, cap,
-                              m.dt)
+        request, tail = first.replan(k)
         try:
-            plan_checked(planner, request, k, tail, m.limits)
+            plan_checked(planner, request, k, tail, first.corpus.config.machine.limits)
         except (PlanningError, ValueError, RuntimeError, ArithmeticError) as exc:
-            failed.append((k, st, str(exc)[:120]))
+            failed.append((k, request.start, str(exc)[:120]))
     assert not failed, (len(failed), failed[:3])
 
 

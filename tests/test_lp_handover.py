@@ -7,16 +7,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from bench.corpus import load_corpus
 from bench.replan_continuity import states_on
 from scipy.interpolate import PPoly
 
-from lookahead.planning.base import FeedProfile, PathState, PlanningError, PlanRequest
+from corpus_windows import FirstWindow, first_window
+from lookahead.planning.base import FeedProfile, PlanningError
 from lookahead.planning.heuristic import HeuristicPlanner
 from lookahead.planning.lp import LPPlanner
 from lookahead.planning.lp.handover import is_committed_stop, zero_acceleration_times
-from lookahead.stream.engine import horizon_length
-from lookahead.stream.plans import CommittedPlan, plan_checked
+from lookahead.stream.plans import plan_checked
 
 
 def _profile(c: list[list[float]], x: list[float]) -> FeedProfile:
@@ -45,40 +44,20 @@ def test_a_brake_to_rest_is_a_committed_stop_and_a_dip_is_not():
 
 
 @pytest.fixture(scope="module")
-def short_helix():
-    """The short helical layer (R 50 mm, 45 deg), the request limits and window of the
-    engine, the heuristic's first window from rest and its plan anchored at sample 0."""
-    p = load_corpus("fast", pattern="w-hel-R50-a45-sine-2mm-short")[0]
-    m = p.config.machine
-    path = p.path()
-    lim = m.limits.scaled(p.config.planner.margin)
-    window = horizon_length(lim, np.asarray(m.path_scale, float), p.config.planner.horizon_s)
-    first = HeuristicPlanner(margin=1.0).plan(PlanRequest(
-        path, lim, PathState(0.0), min(path.length, window), 0.0, p.geometry().feed_cap(),
-        m.dt))
-    return p, path, lim, window, CommittedPlan.anchor(path, first, 0, m.dt), first.profile
-
-
-def _replan_request(short_helix, k: int) -> tuple[PlanRequest, np.ndarray]:
-    p, path, lim, window, base, _ = short_helix
-    dt = p.config.machine.dt
-    st = base.state(k, dt)
-    tail = base.samples(max(k - 2, 0), min(k, 2) + 1, dt).pos
-    return PlanRequest(path, lim, st, min(path.length, st.s + window), 0.0,
-                       p.geometry().feed_cap(), dt), tail
+def short_helix() -> FirstWindow:
+    """The short helical layer (R 50 mm, 45 deg): the heuristic's first window."""
+    return first_window("w-hel-R50-a45-sine-2mm-short")
 
 
 def test_lp_replans_from_every_state_of_the_heuristics_plan(short_helix):
     """From 15 seeded states of the heuristic's plan (5 in its braking to the window's end),
     every LP replan passes the engine's check; without the handover some fail (19 of 50 on
     this path before), and the handed-over plans keep the transient to a small share."""
-    p, *_, first = short_helix
-    limits = p.config.machine.limits
-    dt = p.config.machine.dt
+    limits = short_helix.corpus.config.machine.limits
     failed_without, handed = 0, []
-    for t, _ in states_on(first, 12, np.random.default_rng(1)):
-        k = round(t / dt)
-        request, tail = _replan_request(short_helix, k)
+    for t, _ in states_on(short_helix.plan.profile, 12, np.random.default_rng(1)):
+        k = round(t / short_helix.dt)
+        request, tail = short_helix.replan(k)
         if request.s_end - request.start.s < 1e-6:
             continue
         plan = plan_checked(LPPlanner(), request, k, tail, limits)  # raises if refused
@@ -98,14 +77,12 @@ def test_a_hard_accelerating_start_keeps_the_lps_speed(short_helix):
     accelerates above a third of that feed) that the LP alone fails from (k = 259, 578 mm/s
     at +2522 mm/s^2, when found): handed over, the heuristic's transient takes under 10 % of
     the plan's time, which passes the engine's check and is shorter than the heuristic's."""
-    p, *_, first = short_helix
-    dt = p.config.machine.dt
-    limits = p.config.machine.limits
-    t = np.arange(0.0, first.duration, dt)
-    _, v, a, _ = first.at(t)
+    limits = short_helix.corpus.config.machine.limits
+    profile = short_helix.plan.profile
+    _, v, a, _ = profile.at(np.arange(0.0, profile.duration, short_helix.dt))
     rising = np.flatnonzero((v > np.max(v) / 3.0) & (a > 0.0))[::10]
     for k in rising:
-        request, tail = _replan_request(short_helix, int(k))
+        request, tail = short_helix.replan(int(k))
         try:
             LPPlanner(handover=False).plan(request)
         except PlanningError:
