@@ -90,17 +90,20 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from collections import OrderedDict
 from concurrent.futures import Executor, Future, wait
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from lookahead.checker import check_positions
 from lookahead.config import Config
 from lookahead.limits import AxisLimits
-from lookahead.planning.base import PathState, Planner, PlanRequest
+from lookahead.planning.base import PathState, Planner, PlanRequest, PlanResult
 from lookahead.planning.heuristic import HeuristicPlanner  # at start-up, not per job
 from lookahead.protocol import Command, CommandReply, Event, Segment, SetpointBatch, Status
+from lookahead.sampling import sample_profile
 from lookahead.stream.ahead import (
     InlineExecutor,
     PendingPlan,
@@ -119,6 +122,8 @@ from lookahead.stream.plans import (
     CommittedPlan,
     rest_plan,
     shortest_stop,
+    verify,
+    warped_profile,
 )
 
 log = logging.getLogger("lookahead.engine")
@@ -145,6 +150,10 @@ REPLAN_MIN_S = 0.02
 START_WAIT_S = 0.5
 #: during an override change that needs a slowdown first, retry the new limits this often
 TRANSITION_RETRY_S = 0.03
+#: real time: an override's bridge is first the plan in force re-timed to the new override
+#: (`Engine._warp_bridge`), its rate ramped over the first of these durations (s) whose
+#: ramp passes the checker
+WARP_RAMPS_S = (0.05, 0.1, 0.2, 0.4, 0.8, 1.6)
 #: job ids remembered as finished (later segments of them are rejected)
 MAX_DONE = 4096
 #: a job's first point may differ from the machine position by this much per axis (axis
@@ -173,6 +182,8 @@ class _Job:
     starved: bool = False
     force_replan: bool = False
     override_pending: bool = False
+    #: the override the plan in force was planned at, while an override waits for its replan
+    override_from: float = 1.0
     last_try: int = 0
     last_fail: int = -(10**9)  # sample index of the last failed replan (retry backoff)
     fallbacks_at_start: int = 0  # engine.fallbacks when the job started (job_finished)
@@ -535,6 +546,55 @@ class Engine:
             self._replan(job, plan, k_plan, plan.state(k_plan, self.dt), s_end)
         return True
 
+    def _warp_bridge(self, job: _Job, k_last: int, state: PathState, target: float
+                     ) -> bool:
+        """Real time, an override of a moving plan (not a stop): bridge it by the plan in
+        force re-timed (`plans.warped_profile`): its rate ramps from 1 to the ratio of the
+        new override's limits to the old one's, then it runs time-scaled by that ratio, so
+        it keeps the new limits (as its planner kept the old ones) to its rest. No planner
+        call: a heuristic bridge from such a state took seconds on hard paths (B-spline
+        corners: up to 8 s per attempt, failing), longer than the buffer. The ramp is the
+        shortest of WARP_RAMPS_S whose samples pass the checker (at the limits, as every
+        transition of an override); then the whole plan is checked. The configured
+        planner's replan computed ahead takes over from it after the ramp. False (nothing
+        changed) where it does not apply or no ramp passes."""
+        plan = job.plan
+        if (not (self.realtime and self.bridge_overrides) or self.planner is self.stop_planner
+                or plan is None or job.stop is not None or k_last >= plan.k_end):
+            return False
+        t_start = time.perf_counter()
+        f_old, f_new = job.override_from, self.override
+        if not (f_old > 0 and f_new > 0):
+            return False
+        ratio = min(min(f_new, 1.0) / min(f_old, 1.0), f_new / f_old)
+        t0 = (k_last - plan.k_plan) * self.dt
+        if not t0 < plan.profile.duration:
+            return False
+        tail = job.tail
+        for ramp in WARP_RAMPS_S:
+            profile, t_ramp = warped_profile(plan.profile, t0, ratio, ramp, self.dt)
+            n_ramp = math.ceil(t_ramp / self.dt) + 3
+            pos = sample_profile(plan.path, profile, np.arange(1, n_ramp + 1) * self.dt).pos
+            if not check_positions(np.vstack([tail, pos]) if tail.size else pos,
+                                   self.limits, self.dt).ok:
+                continue
+            result = PlanResult(profile, "override", time.perf_counter() - t_start,
+                                {"ratio": ratio, "ramp_s": ramp})
+            bridge, k_new = CommittedPlan.anchor(plan.path, result, k_last,
+                                                 self.dt).with_samples(self.dt, plan)
+            if verify(bridge, tail, self.limits, self.dt, k_new):
+                continue
+            self._adopt(job, PlanOutcome(bridge), state, bridge.s_end, k_last,
+                        job.planned_final)
+            self.bridges += 1
+            log.info("override %.3g -> %.3g job=%s k=%d: the plan in force re-timed by %.4g "
+                     "(ramp %.3g s)", f_old, f_new, job.id, k_last, ratio, ramp)
+            if k_last < bridge.k_end:
+                self._replan(job, bridge, k_last, state, target,
+                             not_before=k_last + math.ceil(t_ramp / self.dt))
+            return True
+        return False
+
     def _adopt(self, job: _Job, outcome: PlanOutcome, start: PathState, s_end: float,
                k_plan: int, final: float) -> bool:
         """Put a replan's outcome in force (or count its failure: the old plan stays);
@@ -564,10 +624,16 @@ class Engine:
         return True
 
     def _replan(self, job: _Job, plan: CommittedPlan, k_last: int, state: PathState,
-                target: float) -> None:
+                target: float, not_before: int | None = None) -> None:
         """A replan on time or on new geometry: in real-time mode computed ahead (it takes
-        over `ahead_samples` later, from the plan in force's state there), else now."""
+        over `ahead_samples` later, from the plan in force's state there), else now.
+        not_before: take over no earlier than this sample where the plan in force still
+        moves there (in whole batches; the end of an override's ramp, `_warp_bridge`)."""
         ahead = ahead_samples(k_last, plan.k_end, self.batch, self.dt) if self.realtime else 0
+        if ahead > 0 and not_before is not None and k_last + ahead < not_before:
+            later = -(-(not_before - k_last) // self.batch) * self.batch
+            if k_last + later < plan.k_end:
+                ahead = later
         if ahead <= 0:
             if self._commit(job, state, target, k_last):
                 job.starved = False
@@ -632,7 +698,8 @@ class Engine:
             job.override_pending = False
             state = plan.state(k_last, self.dt)
             target = min(geo.final_length, state.s + self.horizon_len)
-            if target > state.s + self._tol(job) and not self._commit_command(
+            if target > state.s + self._tol(job) and not self._warp_bridge(
+                    job, k_last, state, target) and not self._commit_command(
                     job, state, target, k_last):
                 self._begin_stop(job, "override")
                 job.last_try = k_last
@@ -740,6 +807,8 @@ class Engine:
         job = self._active
         if cmd.verb == "override":
             assert cmd.value is not None
+            if job is not None and not job.override_pending:
+                job.override_from = self.override
             self.override = float(cmd.value)
             self._forget_plans()
             if job is not None:

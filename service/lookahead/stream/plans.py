@@ -240,3 +240,142 @@ def shortest_stop(planner: Planner, base: PlanRequest, k_plan: int, tail: np.nda
         else:
             best, hi = trial, mid
     return best
+
+
+def _polymul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Row-wise product of polynomials (ascending coefficients): (n, a) x (n, b) -> (n, a+b-1)."""
+    out = np.zeros((p.shape[0], p.shape[1] + q.shape[1] - 1))
+    for i in range(p.shape[1]):
+        out[:, i:i + q.shape[1]] += p[:, i:i + 1] * q
+    return out
+
+
+def warped_profile(profile: FeedProfile, t0: float, ratio: float, ramp_s: float, dt: float
+                   ) -> tuple[FeedProfile, float]:
+    """The profile from its time t0 on, run at a rate that ramps from 1 to `ratio` over
+    `ramp_s` (profile time advances at r(tau) per unit of time tau; r has a constant
+    second derivative, -/+, on each half of the ramp, and r' = 0 at both ends), then at
+    `ratio` to the end: s_new(tau) = s(sigma(tau)), sigma(0) = t0, sigma' = r. Exact (a
+    piecewise polynomial of degree 3 x the profile's), continuous in s, v, a (the jerk
+    steps where r'' does); it starts in the profile's state at t0 and, after the ramp,
+    is the profile time-scaled by `ratio`: within limits time-scaled by (ratio, ratio^2,
+    ratio^3) of those the profile kept. Returns the profile and the ramp's end (its time).
+    The ramp is stored as quintic Hermite pieces between the times k dt (`_quintic_hermite`:
+    exact s, v, a there), the rest at the profile's own degree (at least 5)."""
+    pp = profile.s_of_t
+    x0 = float(pp.x[0])
+    delta = 1.0 - ratio
+    half = 0.5 * ramp_s
+    c2 = 4.0 * delta / ramp_s**2  # |r''| on each half
+    # r, r', r'' at the starts of the ramp's halves and after it (knots 0, half, ramp_s)
+    knots = np.array([0.0, half, ramp_s])
+    r_k = np.array([1.0, 1.0 - 0.5 * delta, ratio])
+    dr_k = np.array([0.0, -c2 * half, 0.0])
+    ddr_k = np.array([-c2, c2, 0.0])
+    sig_k = np.array([0.0, half - c2 * half**3 / 6.0, 0.0])
+    sig_k[2] = sig_k[1] + r_k[1] * half + 0.5 * dr_k[1] * half**2 + c2 * half**3 / 6.0
+
+    def sigma(tau: np.ndarray) -> np.ndarray:
+        i = np.clip(np.searchsorted(knots, tau, side="right") - 1, 0, 2)
+        u = tau - knots[i]
+        return sig_k[i] + r_k[i] * u + 0.5 * dr_k[i] * u**2 + ddr_k[i] * u**3 / 6.0
+
+    # the times tau of the profile's breakpoints after t0 (sigma is increasing)
+    bx = pp.x[1:] - x0
+    bx = bx[bx > t0 + 1e-12]
+    rel = bx - t0
+    tau_b = np.empty_like(rel)
+    after = rel >= sig_k[2]
+    tau_b[after] = ramp_s + (rel[after] - sig_k[2]) / ratio
+    inside = ~after
+    if inside.any():
+        lo, hi = np.zeros(int(inside.sum())), np.full(int(inside.sum()), ramp_s)
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            below = sigma(mid) < rel[inside]
+            lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
+        tau_b[inside] = 0.5 * (lo + hi)
+    tau_end = float(tau_b[-1])  # the profile's end (the caller asks for t0 < its end)
+    edges = np.unique(np.concatenate([[0.0], tau_b, knots[(knots > 0) & (knots < tau_end)]]))
+    edges = edges[edges <= tau_end]
+    a, b = edges[:-1], edges[1:]
+    keep = b - a > 1e-15
+    a = a[keep]
+    edges = np.concatenate([a, [tau_end]])
+    # on each interval: sigma(a + u) - x_i as a cubic in u; the profile's piece i there
+    i_k = np.clip(np.searchsorted(knots, 0.5 * (edges[:-1] + edges[1:]), side="right") - 1,
+                  0, 2)
+    u0 = a - knots[i_k]
+    r_a = r_k[i_k] + dr_k[i_k] * u0 + 0.5 * ddr_k[i_k] * u0**2
+    dr_a = dr_k[i_k] + ddr_k[i_k] * u0
+    mid_t = t0 + sigma(0.5 * (edges[:-1] + edges[1:]))
+    piece = np.clip(np.searchsorted(pp.x - x0, mid_t, side="right") - 1, 0, pp.c.shape[1] - 1)
+    q = np.column_stack([t0 + sigma(a) - (pp.x[piece] - x0), r_a, 0.5 * dr_a,
+                         ddr_k[i_k] / 6.0])
+    # compose piece by piece at each part's own degree: in the ramp sigma is a cubic, after
+    # it a line (the profile's own degree; a warp's padded zero rows stay exact zeros, so
+    # warps in turn multiply the degree only where their ramps overlap)
+    ramp_part = i_k < 2
+    parts = []
+    for sel, width in ((ramp_part, 4), (~ramp_part, 2)):
+        if not sel.any():
+            parts.append(np.zeros((0, 1)))
+            continue
+        coef = pp.c[:, piece[sel]]  # descending powers
+        nonzero = np.nonzero(np.any(coef != 0.0, axis=1))[0]
+        coef = coef[nonzero[0]:] if nonzero.size else coef[-1:]
+        out = coef[:1].T.copy()
+        for k in range(1, coef.shape[0]):
+            out = _polymul(out, q[sel, :width])
+            out[:, 0] += coef[k]
+        parts.append(out)
+    degree = max(parts[0].shape[1], parts[1].shape[1]) - 1
+    c = np.zeros((a.size, degree + 1))
+    c[ramp_part, :parts[0].shape[1]] = parts[0]
+    c[~ramp_part, :parts[1].shape[1]] = parts[1]
+    exact = PPoly(np.ascontiguousarray(c[:, ::-1].T), edges)
+    # the ramp re-expressed as quintic Hermite pieces between the sample times (s, v, a
+    # exact there: the samples, and the states a replan starts from, are the warp's), so
+    # that warps in turn (an operator turning the knob) do not multiply the degree
+    n = math.ceil(ramp_s / dt - 1e-9)
+    if n * dt >= tau_end - 1e-12:  # the profile ends within the ramp: Hermite to its end
+        knots = np.arange(math.ceil(tau_end / dt - 1e-9)) * dt
+        knots = np.concatenate([knots[knots < tau_end - 1e-9], [tau_end]])
+        sva = np.stack([exact(knots, nu) for nu in range(3)])
+        return (FeedProfile(PPoly(_quintic_hermite(sva, np.diff(knots)), knots)),
+                float(tau_end))
+    knots = np.arange(n + 1) * dt
+    sva = np.stack([exact(knots, nu) for nu in range(3)])
+    hermite = _quintic_hermite(sva, np.full(n, dt))
+    cut = knots[-1]
+    first = int(np.clip(np.searchsorted(edges, cut, side="right") - 1, 0, a.size - 1))
+    d_post = parts[1].shape[1] - 1
+    deg = max(5, d_post)
+    # after the ramp: the profile's own degree; the piece cut at the last knot re-centred
+    # there (its Taylor coefficients), the later pieces as they are
+    piece_c = exact.c[exact.c.shape[0] - d_post - 1:, first]
+    delta = cut - edges[first]
+    taylor = [np.polyval(np.polyder(piece_c, nu), delta) / math.factorial(nu)
+              if nu else np.polyval(piece_c, delta) for nu in range(d_post + 1)]
+    n_post = a.size - first
+    c_all = np.zeros((deg + 1, n + n_post))
+    c_all[deg - 5:, :n] = hermite
+    c_all[deg - d_post:, n] = taylor[::-1]
+    if n_post > 1:
+        c_all[deg - d_post:, n + 1:] = exact.c[exact.c.shape[0] - d_post - 1:, first + 1:]
+    x_all = np.concatenate([knots, edges[first + 1:]])
+    return FeedProfile(PPoly(c_all, x_all)), float(ramp_s)
+
+
+def _quintic_hermite(sva: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """PPoly coefficients (6, n), descending powers, of the quintic pieces between n + 1
+    knots (`h`: the n spacings) that take the (s, v, a) of `sva` (3, n + 1) at both ends."""
+    s0, v0, a0 = sva[:, :-1]
+    s1, v1, a1 = sva[:, 1:]
+    d = s1 - (s0 + v0 * h + 0.5 * a0 * h * h)
+    dv = v1 - (v0 + a0 * h)
+    da = a1 - a0
+    c3 = (20.0 * d - 8.0 * h * dv + h * h * da) / (2.0 * h**3)
+    c4 = (-30.0 * d + 14.0 * h * dv - 2.0 * h * h * da) / (2.0 * h**4)
+    c5 = (12.0 * d - 6.0 * h * dv + h * h * da) / (2.0 * h**5)
+    return np.stack([c5, c4, c3, 0.5 * a0, v0, s0])
