@@ -13,6 +13,7 @@ judged by the finite-difference checker. Both variants run the same commands at 
 samples, one after the other in one process (compute times share the machine's load).
 
     .venv/bin/python bench/override_latency.py [--paths GLOB,...] [--overrides 6] [--seed 1]
+        [--variants at_once,bridged]
 
 Results: bench/results/override_latency.json.
 """
@@ -108,6 +109,8 @@ def main() -> int:
     ap.add_argument("--overrides", type=int, default=6)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--out", default=str(OUT))
+    ap.add_argument("--variants", default="at_once,bridged",
+                    help="comma-separated: at_once, bridged")
     args = ap.parse_args()
     globs = args.paths.split(",")
     out: dict = {"meta": {"overrides": args.overrides, "seed": args.seed,
@@ -121,6 +124,8 @@ def main() -> int:
         at = sorted(int(x) for x in rng.integers(n // 20, int(0.8 * n), args.overrides))
         row = out["paths"][p.name] = {}
         for variant, bridge in (("at_once", False), ("bridged", True)):
+            if variant not in args.variants.split(","):
+                continue
             r = row[variant] = run(p, bridge, at)
             print(f"{p.name:40s} {variant:8s} block max {max(r['block_ms'], default=0):7.1f} "
                   f"ms  median {np.median(r['block_ms']) if r['block_ms'] else 0:6.1f} ms  "
