@@ -38,11 +38,12 @@ Planning (DESIGN.md "Look-ahead window"): every plan starts in the state of the 
 published sample (s, ds/dt, d2s/dt2 continuous; in real-time mode a replan on time or on new
 geometry starts instead on the plan in force, `stream.ahead.ahead_samples` later, and takes
 over there: the `executor`, the service's worker thread, computes it meanwhile; commands
-and a job's first plan are planned at once, an override in real time by the stop planner
-as a bridge from which the configured planner's replan computed ahead takes over,
-`_commit_command`) and ends at rest inside final geometry, at
-min(final length, s + horizon); every plan is checked with the finite-difference checker
-against the published tail before it is committed. If the configured planner fails, the
+and a job's first plan are planned at once, an override in real time by a bridge from
+which the configured planner's replan computed ahead takes over: the plan in force re-timed
+to the new override, `_warp_bridge`, else the stop planner's plan, `_commit_command`) and
+ends at rest inside final geometry, at min(final length, s + horizon); every plan is
+checked with the finite-difference checker against the published tail before it is
+committed. If the configured planner fails, the
 stop planner (heuristic) gets the same request (`fallbacks` counts these); if both fail,
 the previous plan (which also ends at rest) stays in force. Cadence: a replan comes when
 the plan in force looks ahead (its rest point beyond the last published sample) at most
@@ -184,6 +185,9 @@ class _Job:
     override_pending: bool = False
     #: the override the plan in force was planned at, while an override waits for its replan
     override_from: float = 1.0
+    #: the plan in force is a stop (`_begin_stop`: planned at the full limits, not at the
+    #: override): an override does not re-time it (`_warp_bridge`)
+    stop_in_force: bool = False
     last_try: int = 0
     last_fail: int = -(10**9)  # sample index of the last failed replan (retry backoff)
     fallbacks_at_start: int = 0  # engine.fallbacks when the job started (job_finished)
@@ -560,13 +564,16 @@ class Engine:
         changed) where it does not apply or no ramp passes."""
         plan = job.plan
         if (not (self.realtime and self.bridge_overrides) or self.planner is self.stop_planner
-                or plan is None or job.stop is not None or k_last >= plan.k_end):
+                or plan is None or job.stop is not None or job.stop_in_force
+                or k_last >= plan.k_end):
             return False
         t_start = time.perf_counter()
         f_old, f_new = job.override_from, self.override
         if not (f_old > 0 and f_new > 0):
             return False
-        ratio = min(min(f_new, 1.0) / min(f_old, 1.0), f_new / f_old)
+        ratio = min(f_new, 1.0) / min(f_old, 1.0)  # the limits' time scaling
+        if job.geo.feed_cap() is not None:  # segment feeds scale with the override itself
+            ratio = min(ratio, f_new / f_old)
         t0 = (k_last - plan.k_plan) * self.dt
         if not t0 < plan.profile.duration:
             return False
@@ -617,6 +624,7 @@ class Engine:
                      100.0 * h["share"], ", a committed stop" if h["whole"] else "",
                      h["reason"])
         job.plan = outcome.plan
+        job.stop_in_force = False
         job.planned_final = final
         job.force_replan = False
         self.replans += 1
@@ -792,6 +800,7 @@ class Engine:
                     break
         if stop is not None:
             job.plan = stop
+            job.stop_in_force = True
             self.plan_ms = stop.compute_s * 1e3
         log.info("stop (%s) job=%s k=%d from s=%.6g v=%.6g: rest at s=%.6g, k=%d", kind,
                  job.id, k_last, state.s, state.v, job.plan.s_end, job.plan.k_end)
