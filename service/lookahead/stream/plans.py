@@ -24,6 +24,7 @@ from lookahead.planning.base import (
     PlanRequest,
     PlanResult,
 )
+from lookahead.planning.lp.profile import quintic_coefficients
 from lookahead.sampling import Samples, sample_profile
 
 #: relative tolerance on arc lengths (fraction of the path length, at least 1 unit)
@@ -369,13 +370,9 @@ def warped_profile(profile: FeedProfile, t0: float, ratio: float, ramp_s: float,
 
 def _quintic_hermite(sva: np.ndarray, h: np.ndarray) -> np.ndarray:
     """PPoly coefficients (6, n), descending powers, of the quintic pieces between n + 1
-    knots (`h`: the n spacings) that take the (s, v, a) of `sva` (3, n + 1) at both ends."""
+    knots (`h`: the n time spacings) that take the (s, v, a) of `sva` (3, n + 1) at both
+    ends (the LP's interval quintic, `lp.profile.quintic_coefficients`)."""
     s0, v0, a0 = sva[:, :-1]
     s1, v1, a1 = sva[:, 1:]
-    d = s1 - (s0 + v0 * h + 0.5 * a0 * h * h)
-    dv = v1 - (v0 + a0 * h)
-    da = a1 - a0
-    c3 = (20.0 * d - 8.0 * h * dv + h * h * da) / (2.0 * h**3)
-    c4 = (-30.0 * d + 14.0 * h * dv - 2.0 * h * h * da) / (2.0 * h**4)
-    c5 = (12.0 * d - 6.0 * h * dv + h * h * da) / (2.0 * h**5)
+    c3, c4, c5 = quintic_coefficients(h, s1 - s0, v0, a0, v1, a1)
     return np.stack([c5, c4, c3, 0.5 * a0, v0, s0])
