@@ -111,6 +111,7 @@ def stream(job: Path, method: str, realtime: bool = False) -> dict:
             "violations": rep.get("violations"), "gaps": rep.get("gaps"),
             "fallbacks": rep.get("fallbacks"), "clean": rep.get("clean"),
             "underruns": rep.get("underruns"), "max_lateness_s": rep.get("max_lateness_s"),
+            "late_replans": rep.get("late_replans"),
             "service_peak_rss_mb": max((m for _, m in memory), default=None),
             "service_rss_over_time": memory[:: max(1, len(memory) // 40)],
             "service_warning_count": sum("WARNING" in ln for ln in service_err.splitlines()),

@@ -60,6 +60,9 @@ class JobMonitor:
         #: window plans the service's configured planner could not make (its job_finished
         #: event's `fallbacks`; None: not known). A fallback is a failure (issue 13).
         self.fallbacks: int | None = None
+        #: replans the service dropped because they were late (batches' `dropped`): the
+        #: plan in force went on, an unplanned slowdown instead of an underrun
+        self.late_replans = 0
         self._t0: float | None = None
         self.last_arrival = 0.0
         #: largest (arrival - due time) of a batch's first sample, s (< 0: all early)
@@ -98,6 +101,7 @@ class JobMonitor:
         if self.realtime and lateness > 0:
             self.underruns += 1
         self.final = self.final or batch.final
+        self.late_replans += len(batch.dropped)
         if batch.n == 0:
             return
         self.checker.feed(batch.pos)
@@ -133,7 +137,7 @@ class JobMonitor:
         if fault is None and not self.final:
             fault = "the job ended without a final batch"
         clean = (check.ok and self.gaps == 0 and self.underruns == 0 and fault is None
-                 and not self.fallbacks)
+                 and not self.fallbacks and not self.late_replans)
         return {
             "v": 1,
             "job": self.job,
@@ -156,6 +160,7 @@ class JobMonitor:
             "fibre_angle_error_mean": float(errors.mean()) if errors.size else 0.0,
             "fault": fault,
             "fallbacks": self.fallbacks,
+            "late_replans": self.late_replans,
             "clean": bool(clean),
         }
 
@@ -178,7 +183,8 @@ def summary(report: dict) -> str:
     lines.append(f"  max following error {fe}; gaps {report['gaps']}, "
                  f"underruns {report['underruns']}{late_text}")
     fallbacks = report.get("fallbacks")
-    lines.append("  planner fallbacks " + ("unknown" if fallbacks is None else str(fallbacks)))
+    lines.append("  planner fallbacks " + ("unknown" if fallbacks is None else str(fallbacks))
+                 + f", late replans dropped {report.get('late_replans', 0)}")
     lines.append(f"  fibre angle error on {len(report['traverses'])} traverses: max "
                  f"{report['fibre_angle_error_max']:.4f} deg, mean "
                  f"{report['fibre_angle_error_mean']:.4f} deg")

@@ -4,10 +4,11 @@ the recorded ones, batch by batch.
 
 For each recorded setpoint batch, in order: submit the segments its `applied` list names
 (their recorded payloads) and apply the commands (hold, override, ...) its `commands` list
-names, in the order the service took them in, then ask the engine for batches until it
-returns one, and compare job, seq, k0, n, final and the pos/vel/acc arrays. The engine runs
-as the recorded service did, `--fast` or in real time (`--mode`; by default it tries both).
-Exit 0 if every batch matches (within `--tolerance`).
+names, in the order the service took them in, mark the replans computed ahead that its
+`dropped` list names (the real-time service dropped them as late), then ask the engine for
+batches until it returns one, and compare job, seq, k0, n, final and the pos/vel/acc
+arrays. The engine runs as the recorded service did, `--fast` or in real time (`--mode`;
+by default it tries both). Exit 0 if every batch matches (within `--tolerance`).
 
 What replay promises: bit-identical on the machine that made the recording, i.e. under the
 same software versions (header `software`) AND the same floating-point environment (header
@@ -280,6 +281,8 @@ def replay(rec, cfg, realtime: bool = False, tolerance: float = 0.0, perturb: fl
             seg = Segment.decode(payload)
             engine.submit(perturbed(seg, perturb, rng) if perturb else seg)
             res.segments += 1
+        for k_at in want.dropped:  # replans the recorded service dropped as late
+            engine.drop_replan(want.job, k_at)
         got = None
         for _ in range(MAX_IDLE_CALLS):
             got = engine.next_batch()

@@ -316,6 +316,10 @@ class SetpointBatch:
     commands: our extension: (verb, value, after) of the commands the service applied just
     before it produced this batch, in order; `after` = how many of `applied` it had taken
     in before the command (a replay interleaves them exactly).
+    dropped: our extension: the sample indices k_at (this job) of replans computed ahead
+    that the service dropped just before it produced this batch, because they were not
+    done when their take-over was due (real time; the plan in force went on; a replay
+    drops them too).
     """
 
     job: str
@@ -329,6 +333,7 @@ class SetpointBatch:
     final: bool
     applied: tuple[tuple[str, int], ...] = ()
     commands: tuple[tuple[str, float | None, int], ...] = ()
+    dropped: tuple[int, ...] = ()
 
     @property
     def n(self) -> int:
@@ -343,7 +348,8 @@ class SetpointBatch:
                       "pos": blob(self.pos), "vel": blob(self.vel), "acc": blob(self.acc),
                       "final": self.final,
                       "applied": [[job, seq] for job, seq in self.applied],
-                      "commands": [[verb, value, after] for verb, value, after in self.commands]})
+                      "commands": [[verb, value, after] for verb, value, after in self.commands],
+                      **({"dropped": list(self.dropped)} if self.dropped else {})})
 
     @staticmethod
     def decode(payload: bytes) -> SetpointBatch:
@@ -367,8 +373,12 @@ class SetpointBatch:
             arrays.append(np.frombuffer(raw, dtype="<f8").reshape(n, len(axes)))
         applied = _applied(msg.get("applied", []))
         commands = _commands(msg.get("commands", []), len(applied))
+        dropped = msg.get("dropped", [])
+        if not isinstance(dropped, list):
+            raise ProtocolError("dropped", "expected an array of sample indices")
+        dropped = tuple(_int(k, "dropped", lo=0) for k in dropped)
         return SetpointBatch(job, seq, k0, dt, axes, *arrays, final=final, applied=applied,
-                             commands=commands)
+                             commands=commands, dropped=dropped)
 
 
 def _applied(value: Any) -> tuple[tuple[str, int], ...]:

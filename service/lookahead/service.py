@@ -78,6 +78,12 @@ PRODUCE_MAX_S = 0.05
 #: MAX_AHEAD_S (s)
 MIN_AHEAD_S = 0.05
 MAX_AHEAD_S = 1.0
+#: real time: a replan computed ahead that is not done this long (s) before the batch of
+#: its take-over must be published is dropped, and the plan in force goes on
+#: (`Engine.takeover_budget`). It is what producing and handing over that batch takes after
+#: the decision: sampling a 10-sample batch takes < 1 ms; the rest covers the GIL switches
+#: (5 ms each) while the worker thread plans
+TAKEOVER_MARGIN_S = 0.02
 #: how long a command query waits for the main loop (s)
 COMMAND_TIMEOUT_S = 5.0
 #: shutdown: longest wait for the stop to finish (s)
@@ -129,6 +135,9 @@ class PlannerService:
         self.engine = Engine(config, planner or make_planner(config.planner.method),
                              realtime=not fast, executor=self._planning)
         self.pacer = Pacer(config.machine.dt, config.service.lead_s)
+        self._clock_job: str | None = None  # the job whose first batch started the pacer
+        if not fast:
+            self.engine.takeover_budget = self._takeover_budget
         self.stats = ServiceStats()
         self._incoming: queue.Queue[bytes] = queue.Queue()
         self._incoming_bytes = 0  # bytes of the payloads in _incoming
@@ -352,6 +361,15 @@ class PlannerService:
             self._out_cv.notify_all()
         return batch
 
+    def _takeover_budget(self, k: int) -> float | None:
+        """How long (s) the engine may still wait for the replan computed ahead that takes
+        over at sample k of the active job: until the batch starting there must be
+        published, less TAKEOVER_MARGIN_S (the batches before it are buffered and published
+        meanwhile by the pacer thread). None (no limit) until the job's clock has started."""
+        if self._clock_job is None or self._clock_job != self.engine.active_job:
+            return None
+        return self.pacer.publish_at(k) - time.monotonic() - TAKEOVER_MARGIN_S
+
     def _buffered_s(self) -> float:
         return self._out_samples * self.config.machine.dt
 
@@ -368,6 +386,7 @@ class PlannerService:
             now = time.monotonic()
             if batch.k0 == 0:
                 self.pacer.start(max(now, self._job_end_due or now))
+                self._clock_job = batch.job
             wait = self.pacer.publish_at(batch.k0) - time.monotonic()
             if wait > 0:
                 time.sleep(wait)

@@ -30,9 +30,18 @@ API (stable; the replay client depends on it):
 - `drain_events() -> list[Event]`: every event since the last call (including those that
   `submit`/`expire_gaps`/`reject` returned): publish events from here only.
 
+- `takeover_budget` (real time, set by the service): given the sample k at which a replan
+  computed ahead takes over, how long (s, wall clock) the engine may still wait for it;
+  None (the default, and fast mode): as long as it takes. A replan not done within its
+  budget is dropped: the plan in force goes on (it comes to rest at its window's end if
+  no later replan takes over), a new replan is computed ahead from further along, and the
+  batch lists the dropped take-over in its `dropped` field (`late_replans` counts them).
+- `drop_replan(job, k_at)`: replay of a recorded `dropped` take-over.
+
 Replay: for each recorded batch, submit the segments named in its `applied` list and apply
-the commands of its `commands` list, interleaved as their `after` counts say, then call
-`next_batch()` until it returns a batch; the batches are bit-identical to the recording.
+the commands of its `commands` list, interleaved as their `after` counts say, mark its
+`dropped` take-overs (`drop_replan`), then call `next_batch()` until it returns a batch;
+the batches are bit-identical to the recording.
 
 Planning (DESIGN.md "Look-ahead window"): every plan starts in the state of the last
 published sample (s, ds/dt, d2s/dt2 continuous; in real-time mode a replan on time or on new
@@ -93,6 +102,7 @@ import logging
 import math
 import time
 from collections import OrderedDict
+from collections.abc import Callable
 from concurrent.futures import Executor, Future, wait
 from dataclasses import dataclass, field
 
@@ -192,6 +202,9 @@ class _Job:
     last_fail: int = -(10**9)  # sample index of the last failed replan (retry backoff)
     fallbacks_at_start: int = 0  # engine.fallbacks when the job started (job_finished)
     handovers_at_start: int = 0  # engine.handovers then
+    late_at_start: int = 0  # engine.late_replans then
+    #: take-overs dropped as late since a replan was last adopted (`_take_over`)
+    late: int = 0
     #: the plan in force once it ends at the end of the finished geometry: no replan
     #: extends it (`Engine._maybe_replan`), only a command or a stop replaces it
     settled: CommittedPlan | None = None
@@ -227,6 +240,14 @@ class Engine:
         self._inflight: Future | None = None  # the last replan handed to the executor
         #: replans computed ahead that were not done at their take-over (the engine waited)
         self.takeover_waits = 0
+        #: real time (the service's pacer): seconds the engine may still wait for a replan
+        #: computed ahead whose take-over sample is k; None: no limit (module docstring)
+        self.takeover_budget: Callable[[int], float | None] | None = None
+        #: replans computed ahead dropped because they were not done within their budget
+        #: (the plan in force went on): in status, job_finished and the batches' `dropped`
+        self.late_replans = 0
+        self._dropped: list[int] = []  # take-overs dropped since the last batch
+        self._drop_marks: set[tuple[str, int]] = set()  # replay: take-overs to drop
         self.stop_planner = stop_planner
         #: the shortest-stop search's first try (fast-failing trials, `_begin_stop`)
         self.stop_search_planner = search_planner
@@ -384,6 +405,7 @@ class Engine:
             job.started = True
             job.fallbacks_at_start = self.fallbacks
             job.handovers_at_start = self.handovers
+            job.late_at_start = self.late_replans
             self._job_error = None
             self._emit("job_started", job.id, 0)
         return self._produce(self._active)
@@ -444,7 +466,8 @@ class Engine:
                 return None
         smp = plan.samples(k0, n, self.dt)
         batch = SetpointBatch(job.id, job.batch_seq, k0, self.dt, self.axes, smp.pos, smp.vel,
-                              smp.acc, final, *self._take_inputs())
+                              smp.acc, final, *self._take_inputs(), dropped=tuple(self._dropped))
+        self._dropped.clear()
         job.k += n
         job.batch_seq += 1
         job.tail = (smp.pos[-3:].copy() if n >= 3 else np.vstack([job.tail, smp.pos])[-3:])
@@ -623,8 +646,12 @@ class Engine:
                      self.planner.name, job.id, k_plan, start.s, start.v, start.a, h["s"],
                      100.0 * h["share"], ", a committed stop" if h["whole"] else "",
                      h["reason"])
+        if job.late:
+            log.warning("real time: a replan took over again at k=%d (job %s) after %d "
+                        "dropped as late", k_plan, job.id, job.late)
         job.plan = outcome.plan
         job.stop_in_force = False
+        job.late = 0
         job.planned_final = final
         job.force_replan = False
         self.replans += 1
@@ -642,6 +669,11 @@ class Engine:
             later = -(-(not_before - k_last) // self.batch) * self.batch
             if k_last + later < plan.k_end:
                 ahead = later
+        if ahead <= 0 and job.late and k_last < plan.k_end:
+            # after a dropped take-over the worker may still be running it: planning at
+            # once would wait for it. Take over once the plan in force is at rest instead
+            ahead = (-(-(plan.k_end - k_last) // self.batch) * self.batch
+                     + ahead_samples(plan.k_end, plan.k_end, self.batch, self.dt))
         if ahead <= 0:
             if self._commit(job, state, target, k_last):
                 job.starved = False
@@ -657,17 +689,50 @@ class Engine:
         job.pending = PendingPlan(k_at, start, s_end, job.geo.final_length, future)
 
     def _take_over(self, job: _Job) -> None:
-        """The replan under way takes over once its sample k_at is produced (waiting for
-        it if it is not done)."""
+        """The replan under way takes over once its sample k_at is produced: waiting for
+        it if it is not done, for at most `takeover_budget(k_at + 1)`; past that (or where
+        a replay marks it, `drop_replan`) it is dropped and the plan in force goes on."""
         pending = job.pending
         if pending is None or job.k <= pending.k_at:
             return
         job.pending = None
-        if not pending.future.done():
+        marked = (job.id, pending.k_at) in self._drop_marks
+        self._drop_marks.discard((job.id, pending.k_at))
+        if not marked and not pending.future.done():
             self.takeover_waits += 1
+            budget = self.takeover_budget(pending.k_at + 1) if self.takeover_budget else None
+            wait([pending.future], timeout=None if budget is None else max(budget, 0.0))
+            marked = not pending.future.done()
+        if marked:
+            # the plan in force is checked and ends at rest: going on with it slows the
+            # machine where the replan would not have, but never starves it. The planners
+            # saw the dropped request (a replay computes it too), so their state (the
+            # LP's seams) is the same in a replay; the next replan starts on the plan in
+            # force, which the LP's seam check tells from the dropped plan.
+            self.late_replans += 1
+            self._dropped.append(pending.k_at)
+            job.late += 1
+            # not queued behind a late one (a worker runs its tasks in order); the planners
+            # forget their last plan, computed (a replay) or not (cancelled here), so that
+            # the next replan starts alike in both
+            pending.future.cancel()
+            self._forget_plans()
+            plan = job.plan
+            assert plan is not None
+            log.log(logging.WARNING if job.late == 1 else logging.DEBUG,
+                    "real time: the replan computed ahead to take over at k=%d (job %s, "
+                    "s=%.6g) was not done in time: dropped, the plan in force goes on (at "
+                    "rest at k=%d unless a later replan takes over)", pending.k_at, job.id,
+                    pending.start.s, plan.k_end)
+            return
         if self._adopt(job, pending.future.result(), pending.start, pending.s_end,
                        pending.k_at, pending.final):
             job.starved = False
+
+    def drop_replan(self, job: str, k_at: int) -> None:
+        """Replay: drop the replan computed ahead that takes over at `k_at` in `job` (a
+        recorded batch's `dropped` field), as the recorded service did when it was late."""
+        self._drop_marks.add((job, k_at))
 
     def _planner_free(self) -> None:
         """Wait until no replan under way uses the planners (they are not thread-safe)."""
@@ -981,6 +1046,7 @@ class Engine:
         extra = {"aborted": True} if aborted else {}
         extra["fallbacks"] = self.fallbacks - job.fallbacks_at_start
         extra["handovers"] = self.handovers - job.handovers_at_start
+        extra["late_replans"] = self.late_replans - job.late_at_start
         self._emit("job_finished", job.id, job.k - 1 if job.k else 0,
                    duration_s=max(job.k - 1, 0) * self.dt, **extra)
         self._drop(job)
