@@ -163,3 +163,31 @@ def test_the_dropped_field_on_the_wire() -> None:
         with pytest.raises(ProtocolError) as err:
             SetpointBatch.decode(_pack(msg))
         assert err.value.field == "dropped"
+
+
+def test_the_services_budget_ends_before_the_take_over_batch_is_due() -> None:
+    """The real-time service gives the engine a budget per take-over: until the batch
+    starting at the take-over sample must be published, less TAKEOVER_MARGIN_S; none
+    before the job's clock has started, and no budget at all in fast mode."""
+    from lookahead.service import TAKEOVER_MARGIN_S, PlannerService
+
+    cfg = default_config()
+    assert PlannerService(cfg, fast=True).engine.takeover_budget is None
+    svc = PlannerService(cfg)
+    assert svc.engine.takeover_budget == svc._takeover_budget
+    for seg in job_segments():
+        svc.engine.submit(seg)
+    first = svc.engine.next_batch()
+    assert first is not None and first.k0 == 0
+    assert svc._takeover_budget(1000) is None  # the pacer has not published batch 0 yet
+    now = time.monotonic()
+    svc.pacer.start(now)  # what the pacer thread does with a job's first batch
+    svc._clock_job = first.job
+    budget = svc._takeover_budget(1000)
+    assert budget is not None
+    expected = svc.pacer.publish_at(1000) - now - TAKEOVER_MARGIN_S
+    assert expected - 0.5 < budget <= expected  # (the clock moved on between the calls)
+    assert budget == pytest.approx(1000 * cfg.machine.dt - TAKEOVER_MARGIN_S, abs=0.5)
+    svc._clock_job = "another job"
+    assert svc._takeover_budget(1000) is None
+    svc._planning.shutdown()

@@ -49,7 +49,9 @@ geometry starts instead on the plan in force, `stream.ahead.ahead_samples` later
 over there: the `executor`, the service's worker thread, computes it meanwhile; commands
 and a job's first plan are planned at once, an override in real time by a bridge from
 which the configured planner's replan computed ahead takes over: the plan in force re-timed
-to the new override, `_warp_bridge`, else the stop planner's plan, `_commit_command`) and
+to the new override, `_warp_bridge`, else the stop planner's plan, `_commit_command`; a
+hold, abort or fault stop in real time: the plan in force re-timed to rest where that
+stops within a rough braking guess, else the shortest-stop search below it) and
 ends at rest inside final geometry, at min(final length, s + horizon); every plan is
 checked with the finite-difference checker against the published tail before it is
 committed. If the configured planner fails, the
@@ -165,6 +167,15 @@ TRANSITION_RETRY_S = 0.03
 #: (`Engine._warp_bridge`), its rate ramped over the first of these durations (s) whose
 #: ramp passes the checker
 WARP_RAMPS_S = (0.05, 0.1, 0.2, 0.4, 0.8, 1.6)
+#: real time: a hold, abort or fault stop is first the plan in force re-timed to rest
+#: (`stop_ramps`): its rate r ramps from 1 to 0 as an S-curve whose |r'| and |r''| are the
+#: path acceleration and jerk the axes allow along the tangent where the stop starts, over
+#: the path speed, stretched by the first of these factors whose samples pass the checker
+#: (curvature, a turning tangent and the plan's own acceleration take part of the limits).
+#: Steps of <= 1.33x: a stop at most a third longer than the ramp's shortest passing one
+STOP_STRETCH = (1.0, 1.15, 1.33, 1.6, 2.0, 2.5, 3.2, 4.0, 5.3, 7.0, 9.3, 12.0, 16.0)
+#: the shortest stop ramp (s): from a crawl the S-curve would be shorter than a few samples
+STOP_RAMP_MIN_S = 0.01
 #: job ids remembered as finished (later segments of them are rejected)
 MAX_DONE = 4096
 #: a job's first point may differ from the machine position by this much per axis (axis
@@ -287,6 +298,10 @@ class Engine:
         #: bridge overrides in real time (`_commit_command`); off: the configured planner
         #: plans them at once, as before (bench/override_latency.py's A/B partner)
         self.bridge_overrides = True
+        #: real time: holds, aborts and fault stops re-time the plan in force to rest
+        #: (`_retimed`) before they search the shortest stop; off: the search at once, as
+        #: before (bench/stop_latency.py's A/B partner)
+        self.warp_stops = True
         self._last_k = 0
         self._last_job: str | None = None
         self._position: np.ndarray | None = None  # last published sample, None at start-up
@@ -597,33 +612,47 @@ class Engine:
         ratio = min(f_new, 1.0) / min(f_old, 1.0)  # the limits' time scaling
         if job.geo.feed_cap() is not None:  # segment feeds scale with the override itself
             ratio = min(ratio, f_new / f_old)
+        found = self._retimed(plan, k_last, job.tail, ratio,
+                              [(ramp, 0.0) for ramp in WARP_RAMPS_S], "override")
+        if found is None:
+            return False
+        bridge, ramp, t_ramp = found
+        self._adopt(job, PlanOutcome(bridge), state, bridge.s_end, k_last, job.planned_final)
+        self.bridges += 1
+        log.info("override %.3g -> %.3g job=%s k=%d: the plan in force re-timed by %.4g "
+                 "(ramp %.3g s, %.1f ms)", f_old, f_new, job.id, k_last, ratio, ramp,
+                 1e3 * (time.perf_counter() - t_start))
+        if k_last < bridge.k_end:
+            self._replan(job, bridge, k_last, state, target,
+                         not_before=k_last + math.ceil(t_ramp / self.dt))
+        return True
+
+    def _retimed(self, plan: CommittedPlan, k_last: int, tail: np.ndarray, ratio: float,
+                 ramps: list[tuple[float, float]], label: str
+                 ) -> tuple[CommittedPlan, float, float] | None:
+        """The plan in force from sample k_last on, its rate ramped from 1 to `ratio` (0: a
+        stop) by the first of `ramps` ((duration, of which at constant r') s) whose samples
+        pass the checker after `tail` (`plans.warped_profile`), verified whole: (plan, ramp,
+        the ramp's end in its time), or None if no ramp passes or the plan has ended."""
+        t_start = time.perf_counter()
         t0 = (k_last - plan.k_plan) * self.dt
         if not t0 < plan.profile.duration:
-            return False
-        tail = job.tail
-        for ramp in WARP_RAMPS_S:
-            profile, t_ramp = warped_profile(plan.profile, t0, ratio, ramp, self.dt)
+            return None
+        for ramp, flat in ramps:
+            profile, t_ramp = warped_profile(plan.profile, t0, ratio, ramp, self.dt, flat)
             n_ramp = math.ceil(t_ramp / self.dt) + 3
             pos = sample_profile(plan.path, profile, np.arange(1, n_ramp + 1) * self.dt).pos
             if not check_positions(np.vstack([tail, pos]) if tail.size else pos,
                                    self.limits, self.dt).ok:
                 continue
-            result = PlanResult(profile, "override", time.perf_counter() - t_start,
+            result = PlanResult(profile, label, time.perf_counter() - t_start,
                                 {"ratio": ratio, "ramp_s": ramp})
-            bridge, k_new = CommittedPlan.anchor(plan.path, result, k_last,
-                                                 self.dt).with_samples(self.dt, plan)
-            if verify(bridge, tail, self.limits, self.dt, k_new):
+            retimed, k_new = CommittedPlan.anchor(plan.path, result, k_last,
+                                                  self.dt).with_samples(self.dt, plan)
+            if verify(retimed, tail, self.limits, self.dt, k_new):
                 continue
-            self._adopt(job, PlanOutcome(bridge), state, bridge.s_end, k_last,
-                        job.planned_final)
-            self.bridges += 1
-            log.info("override %.3g -> %.3g job=%s k=%d: the plan in force re-timed by %.4g "
-                     "(ramp %.3g s)", f_old, f_new, job.id, k_last, ratio, ramp)
-            if k_last < bridge.k_end:
-                self._replan(job, bridge, k_last, state, target,
-                             not_before=k_last + math.ceil(t_ramp / self.dt))
-            return True
-        return False
+            return retimed, ramp, t_ramp
+        return None
 
     def _adopt(self, job: _Job, outcome: PlanOutcome, start: PathState, s_end: float,
                k_plan: int, final: float) -> bool:
@@ -846,6 +875,20 @@ class Engine:
             return
         full = self.limits.scaled(self.margin)
         stop = None
+        retimed, s_max = None, plan.s_end
+        if kind != "override" and self.realtime and self.warp_stops:
+            # the plan in force re-timed to rest: no planner call (the shortest-stop search
+            # below took up to 16 s from hard states, far longer than the real-time
+            # buffer). Taken where it stops within the braking distance's rough guess;
+            # else (a plan accelerating hard, which a re-timing can only stretch) the
+            # search looks for a shorter stop, and the re-timed one stays if it finds none
+            tangent = plan.path.eval_s(np.array([state.s]), order=1)[1, 0]
+            found = self._retimed(plan, k_last, job.tail, 0.0,
+                                  stop_ramps(state.v, full, tangent), kind)
+            if found is not None:
+                retimed, s_max = found[0], found[0].s_end
+                if retimed.s_end - state.s <= stop_reach(state, full, tangent):
+                    stop = retimed
         if kind == "override":
             # slow down with the new acceleration and jerk (full feed limits), so that the
             # state soon fits the new limits and the new plan can take over mid-motion
@@ -858,11 +901,16 @@ class Engine:
             base = PlanRequest(plan.path, full, state, plan.s_end, 0.0, None, self.dt)
             # trials that fail fast first; the full stop planner if none succeeds (a
             # state beyond the limits, during an override's transition)
-            for planner in dict.fromkeys((self.stop_search_planner, self.stop_planner)):
-                stop = shortest_stop(planner, base, k_last, job.tail, self.limits,
-                                     plan.s_end)
+            # (with a re-timed stop to keep, only the trials that fail fast: the full stop
+            # planner's failing trials from hard states take seconds each)
+            searchers = (self.stop_search_planner,) if retimed is not None else (
+                self.stop_search_planner, self.stop_planner)
+            for planner in dict.fromkeys(searchers):
+                stop = shortest_stop(planner, base, k_last, job.tail, self.limits, s_max)
                 if stop is not None:
                     break
+            if stop is None:
+                stop = retimed
         if stop is not None:
             job.plan = stop
             job.stop_in_force = True
@@ -1078,6 +1126,38 @@ class Engine:
 
 def _fmt(point: np.ndarray) -> str:
     return "[" + ", ".join(f"{x:.9g}" for x in point) + "]"
+
+
+def stop_ramps(v: float, limits: AxisLimits, tangent: np.ndarray
+               ) -> list[tuple[float, float]]:
+    """(duration, of which at constant r') s of the rate ramps a stop from path speed v
+    tries (`STOP_STRETCH`): the S-curve of r from 1 to 0 with |r'| <= A / v, |r''| <= J / v,
+    A and J the path acceleration and jerk the axes allow along `tangent` (dx/ds per
+    axis), stretched."""
+    v = max(v, 1e-9)
+    acc, jerk = _along(limits, tangent)
+    r1, r2 = acc / v, jerk / v
+    if r1 * r1 >= r2:  # r' never reaches r1: two phases of r'' = -/+ r2
+        edge, flat = math.sqrt(1.0 / r2), 0.0
+    else:
+        edge, flat = r1 / r2, 1.0 / r1 - r1 / r2
+    ramp = 2.0 * edge + flat
+    stretch = max(1.0, STOP_RAMP_MIN_S / ramp)
+    return [(f * stretch * ramp, f * stretch * flat) for f in STOP_STRETCH]
+
+
+def _along(limits: AxisLimits, tangent: np.ndarray) -> tuple[float, float]:
+    """The path acceleration and jerk the axes allow along `tangent` (dx/ds per axis)."""
+    along = np.maximum(np.abs(tangent), 1e-12)
+    return float(np.min(limits.amax / along)), float(np.min(limits.jmax / along))
+
+
+def stop_reach(state: PathState, limits: AxisLimits, tangent: np.ndarray) -> float:
+    """A rough guess of the braking distance from `state` (path units) along `tangent`:
+    about twice the S-curve's from a cruise, more from an accelerating state (the
+    shortest-stop search's first guess, `plans.shortest_stop`, with the tangent's limits)."""
+    acc, jerk = _along(limits, tangent)
+    return state.v * (state.v / acc + acc / jerk) + abs(state.a) ** 3 / jerk**2
 
 
 def braking_distance(limits: AxisLimits, path_scale: np.ndarray) -> float:

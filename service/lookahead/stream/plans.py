@@ -251,12 +251,14 @@ def _polymul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     return out
 
 
-def warped_profile(profile: FeedProfile, t0: float, ratio: float, ramp_s: float, dt: float
-                   ) -> tuple[FeedProfile, float]:
+def warped_profile(profile: FeedProfile, t0: float, ratio: float, ramp_s: float, dt: float,
+                   flat_s: float = 0.0) -> tuple[FeedProfile, float]:
     """The profile from its time t0 on, run at a rate that ramps from 1 to `ratio` over
     `ramp_s` (profile time advances at r(tau) per unit of time tau; r has a constant
-    second derivative, -/+, on each half of the ramp, and r' = 0 at both ends), then at
-    `ratio` to the end: s_new(tau) = s(sigma(tau)), sigma(0) = t0, sigma' = r. Exact (a
+    second derivative, -, 0 and + over the ramp's first (ramp_s - flat_s) / 2, the next
+    `flat_s` and the rest, so r' = 0 at both ends and constant in between), then at
+    `ratio` to the end (`ratio` 0: a stop, at rest at the ramp's end or at the profile's
+    end if that comes first): s_new(tau) = s(sigma(tau)), sigma(0) = t0, sigma' = r. Exact (a
     piecewise polynomial of degree 3 x the profile's), continuous in s, v, a (the jerk
     steps where r'' does); it starts in the profile's state at t0 and, after the ramp,
     is the profile time-scaled by `ratio`: within limits time-scaled by (ratio, ratio^2,
@@ -266,18 +268,25 @@ def warped_profile(profile: FeedProfile, t0: float, ratio: float, ramp_s: float,
     pp = profile.s_of_t
     x0 = float(pp.x[0])
     delta = 1.0 - ratio
-    half = 0.5 * ramp_s
-    c2 = 4.0 * delta / ramp_s**2  # |r''| on each half
-    # r, r', r'' at the starts of the ramp's halves and after it (knots 0, half, ramp_s)
-    knots = np.array([0.0, half, ramp_s])
-    r_k = np.array([1.0, 1.0 - 0.5 * delta, ratio])
-    dr_k = np.array([0.0, -c2 * half, 0.0])
-    ddr_k = np.array([-c2, c2, 0.0])
-    sig_k = np.array([0.0, half - c2 * half**3 / 6.0, 0.0])
-    sig_k[2] = sig_k[1] + r_k[1] * half + 0.5 * dr_k[1] * half**2 + c2 * half**3 / 6.0
+    edge = 0.5 * (ramp_s - flat_s)  # the ramp's first and last phases
+    c2 = delta / (edge * (edge + flat_s))  # |r''| there
+    phases = [(edge, -c2), (flat_s, 0.0), (edge, c2)] if flat_s > 0 else [(edge, -c2),
+                                                                         (edge, c2)]
+    # r, r', r'', sigma at the starts of the ramp's phases and after it (`knots`)
+    knots, r_k, dr_k, ddr_k, sig_k = [0.0], [1.0], [0.0], [], [0.0]
+    for h, ddr in phases:
+        ddr_k.append(ddr)
+        sig_k.append(sig_k[-1] + r_k[-1] * h + 0.5 * dr_k[-1] * h**2 + ddr * h**3 / 6.0)
+        r_k.append(r_k[-1] + dr_k[-1] * h + 0.5 * ddr * h**2)
+        dr_k.append(dr_k[-1] + ddr * h)
+        knots.append(knots[-1] + h)
+    knots[-1], r_k[-1], dr_k[-1] = ramp_s, ratio, 0.0  # exact after the ramp
+    ddr_k.append(0.0)
+    knots, r_k, dr_k, ddr_k, sig_k = map(np.array, (knots, r_k, dr_k, ddr_k, sig_k))
+    last = knots.size - 1  # the phase after the ramp
 
     def sigma(tau: np.ndarray) -> np.ndarray:
-        i = np.clip(np.searchsorted(knots, tau, side="right") - 1, 0, 2)
+        i = np.clip(np.searchsorted(knots, tau, side="right") - 1, 0, last)
         u = tau - knots[i]
         return sig_k[i] + r_k[i] * u + 0.5 * dr_k[i] * u**2 + ddr_k[i] * u**3 / 6.0
 
@@ -286,8 +295,9 @@ def warped_profile(profile: FeedProfile, t0: float, ratio: float, ramp_s: float,
     bx = bx[bx > t0 + 1e-12]
     rel = bx - t0
     tau_b = np.empty_like(rel)
-    after = rel >= sig_k[2]
-    tau_b[after] = ramp_s + (rel[after] - sig_k[2]) / ratio
+    after = rel >= sig_k[last]
+    if ratio > 0.0:
+        tau_b[after] = ramp_s + (rel[after] - sig_k[last]) / ratio
     inside = ~after
     if inside.any():
         lo, hi = np.zeros(int(inside.sum())), np.full(int(inside.sum()), ramp_s)
@@ -296,8 +306,12 @@ def warped_profile(profile: FeedProfile, t0: float, ratio: float, ramp_s: float,
             below = sigma(mid) < rel[inside]
             lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
         tau_b[inside] = 0.5 * (lo + hi)
-    tau_end = float(tau_b[-1])  # the profile's end (the caller asks for t0 < its end)
-    edges = np.unique(np.concatenate([[0.0], tau_b, knots[(knots > 0) & (knots < tau_end)]]))
+    if ratio > 0.0 or not after.any():
+        tau_end = float(tau_b[-1])  # the profile's end (the caller asks for t0 < its end)
+    else:  # ratio 0, a stop: at rest at the ramp's end, before the profile's own end
+        tau_b, tau_end = tau_b[inside], float(ramp_s)
+    edges = np.unique(np.concatenate([[0.0], tau_b, knots[(knots > 0) & (knots < tau_end)],
+                                      [tau_end]]))
     edges = edges[edges <= tau_end]
     a, b = edges[:-1], edges[1:]
     keep = b - a > 1e-15
@@ -305,7 +319,7 @@ def warped_profile(profile: FeedProfile, t0: float, ratio: float, ramp_s: float,
     edges = np.concatenate([a, [tau_end]])
     # on each interval: sigma(a + u) - x_i as a cubic in u; the profile's piece i there
     i_k = np.clip(np.searchsorted(knots, 0.5 * (edges[:-1] + edges[1:]), side="right") - 1,
-                  0, 2)
+                  0, last)
     u0 = a - knots[i_k]
     r_a = r_k[i_k] + dr_k[i_k] * u0 + 0.5 * ddr_k[i_k] * u0**2
     dr_a = dr_k[i_k] + ddr_k[i_k] * u0
@@ -316,7 +330,7 @@ def warped_profile(profile: FeedProfile, t0: float, ratio: float, ramp_s: float,
     # compose piece by piece at each part's own degree: in the ramp sigma is a cubic, after
     # it a line (the profile's own degree; a warp's padded zero rows stay exact zeros, so
     # warps in turn multiply the degree only where their ramps overlap)
-    ramp_part = i_k < 2
+    ramp_part = i_k < last
     parts = []
     for sel, width in ((ramp_part, 4), (~ramp_part, 2)):
         if not sel.any():
