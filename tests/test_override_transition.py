@@ -55,6 +55,27 @@ def test_warped_profile_ramps_then_is_the_profile_time_scaled(ratio, ramp, t0) -
         np.testing.assert_allclose(got[2], ratio**2 * want[2], atol=1e-6)
 
 
+def run_to_profile_peak(engine: Engine, nu: int, skip: int = 40
+                        ) -> tuple[list, int, float]:
+    """Submit `job_segments`, take `skip` batches, then run to the first batch boundary at
+    or before the sample where the plan in force's derivative `nu` (1: feed, 2: path
+    acceleration) is highest within 1.5 s: the batches so far, that sample, the peak."""
+    cfg = engine.config
+    dt = cfg.machine.dt
+    for seg in job_segments():
+        engine.submit(seg)
+    batches = [engine.next_batch() for _ in range(skip)]
+    plan = engine._active.plan
+    k_now = batches[-1].k0 + batches[-1].n
+    ks = np.arange(k_now, min(plan.k_end, k_now + 1500))
+    values = plan.profile.at(plan.times(ks, dt))[nu]
+    k_cmd = int(ks[np.argmax(values)])
+    k_cmd -= k_cmd % cfg.service.batch
+    while batches[-1].k0 + batches[-1].n < k_cmd:
+        batches.append(engine.next_batch())
+    return batches, k_cmd, float(np.max(values))
+
+
 class _Counting:
     """Counts the calls of a planner's `plan`."""
 
@@ -80,20 +101,10 @@ def test_an_override_down_at_full_acceleration_plans_nothing_at_the_command(meth
     dt = cfg.machine.dt
     engine = Engine(cfg, make_planner(method), realtime=True)
     stops = [_Counting(engine.stop_planner), _Counting(engine.stop_search_planner)]
-    for seg in job_segments():
-        engine.submit(seg)
-    batches = [engine.next_batch() for _ in range(40)]
     # the sample of the highest path acceleration in the plan in force, past the start
-    plan = engine._active.plan
-    k_now = batches[-1].k0 + batches[-1].n
-    ks = np.arange(k_now, min(plan.k_end, k_now + 1500))
-    acc = plan.profile.at(plan.times(ks, dt))[2]
-    k_cmd = int(ks[np.argmax(acc)])
-    k_cmd -= k_cmd % cfg.service.batch
-    while batches[-1].k0 + batches[-1].n < k_cmd:
-        batches.append(engine.next_batch())
+    batches, k_cmd, peak = run_to_profile_peak(engine, 2)
     state = engine._active.plan.state(k_cmd - 1, dt)
-    assert state.a > 0.5 * float(np.max(acc))
+    assert state.a > 0.5 * peak
     assert engine.command(Command("override", 0.6)).ok
     batches.append(engine.next_batch())
     assert sum(c.calls for c in stops) == 0

@@ -15,8 +15,8 @@ from lookahead.protocol import Command
 from lookahead.stream.engine import Engine, stop_ramps
 from lookahead.stream.planners import make_planner
 from lookahead.stream.plans import warped_profile
-from test_override_transition import _Counting, _profile
-from test_stream_ahead import checked, job_segments, run_to_end
+from test_override_transition import _Counting, _profile, run_to_profile_peak
+from test_stream_ahead import checked, run_to_end
 
 
 @pytest.mark.parametrize(("ramp", "flat", "t0"), [(0.4, 0.0, 0.37), (0.3, 0.2, 0.1),
@@ -63,19 +63,8 @@ def test_the_first_stop_ramp_is_the_s_curve_at_the_tangents_limits(v, tangent) -
 def _hold_at_full_feed(engine: Engine) -> list:
     """Run `job_segments` to the sample of the plan in force's highest feed (after 0.4 s),
     then send a hold: the batches so far."""
-    cfg = engine.config
-    dt = cfg.machine.dt
-    for seg in job_segments():
-        engine.submit(seg)
-    batches = [engine.next_batch() for _ in range(40)]
-    plan = engine._active.plan
-    k_now = batches[-1].k0 + batches[-1].n
-    ks = np.arange(k_now, min(plan.k_end, k_now + 1500))
-    k_cmd = int(ks[np.argmax(plan.profile.at(plan.times(ks, dt))[1])])
-    k_cmd -= k_cmd % cfg.service.batch
-    while batches[-1].k0 + batches[-1].n < k_cmd:
-        batches.append(engine.next_batch())
-    assert engine._active.plan.state(k_cmd - 1, dt).v > 100.0  # mm/s (X, C)
+    batches, k_cmd, _ = run_to_profile_peak(engine, 1)
+    assert engine._active.plan.state(k_cmd - 1, engine.dt).v > 100.0  # mm/s (X, C)
     assert engine.command(Command("hold")).ok
     return batches
 
@@ -117,15 +106,7 @@ def test_a_real_time_hold_while_accelerating_hard_takes_the_shorter_stop() -> No
     cfg = default_config()
     dt = cfg.machine.dt
     engine = Engine(cfg, make_planner("heuristic"), realtime=True)
-    for seg in job_segments():
-        engine.submit(seg)
-    batches = [engine.next_batch()]
-    plan = engine._active.plan
-    ks = np.arange(10, min(plan.k_end, 1500))
-    k_cmd = int(ks[np.argmax(plan.profile.at(plan.times(ks, dt))[2])])
-    k_cmd -= k_cmd % cfg.service.batch
-    while batches[-1].k0 + batches[-1].n < k_cmd:
-        batches.append(engine.next_batch())
+    batches, k_cmd, _ = run_to_profile_peak(engine, 2, skip=1)
     job = engine._active
     state = job.plan.state(k_cmd - 1, dt)
     full = cfg.machine.limits.scaled(engine.margin)

@@ -133,6 +133,7 @@ from lookahead.stream.assembler import (
 from lookahead.stream.plans import (
     S_TOL,
     CommittedPlan,
+    braking_guess,
     rest_plan,
     shortest_stop,
     verify,
@@ -1156,8 +1157,7 @@ def stop_reach(state: PathState, limits: AxisLimits, tangent: np.ndarray) -> flo
     """A rough guess of the braking distance from `state` (path units) along `tangent`:
     about twice the S-curve's from a cruise, more from an accelerating state (the
     shortest-stop search's first guess, `plans.shortest_stop`, with the tangent's limits)."""
-    acc, jerk = _along(limits, tangent)
-    return state.v * (state.v / acc + acc / jerk) + abs(state.a) ** 3 / jerk**2
+    return braking_guess(state.v, state.a, *_along(limits, tangent))
 
 
 def braking_distance(limits: AxisLimits, path_scale: np.ndarray) -> float:

@@ -215,10 +215,9 @@ def shortest_stop(planner: Planner, base: PlanRequest, k_plan: int, tail: np.nda
 
     # a first guess from the path-level limits: S-curve braking distance at the smallest
     # axis acceleration/jerk (a scalar formula, not worth a solver)
-    v = base.start.v
-    a_min = float(np.min(base.limits.amax * base.path.path_scale))
-    j_min = float(np.min(base.limits.jmax * base.path.path_scale))
-    guess = v * (v / a_min + a_min / j_min) + abs(base.start.a) ** 3 / j_min**2
+    guess = braking_guess(base.start.v, base.start.a,
+                          float(np.min(base.limits.amax * base.path.path_scale)),
+                          float(np.min(base.limits.jmax * base.path.path_scale)))
     lo, hi = s0, s_max
     best = None
     if s0 + guess < s_max:
@@ -241,6 +240,13 @@ def shortest_stop(planner: Planner, base: PlanRequest, k_plan: int, tail: np.nda
         else:
             best, hi = trial, mid
     return best
+
+
+def braking_guess(v: float, a: float, acc: float, jerk: float) -> float:
+    """A rough braking distance (path units) from path speed v and acceleration a at path
+    acceleration and jerk limits acc, jerk: about twice the S-curve's from a cruise, more
+    from an accelerating state."""
+    return v * (v / acc + acc / jerk) + abs(a) ** 3 / jerk**2
 
 
 def _polymul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
