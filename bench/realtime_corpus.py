@@ -12,6 +12,10 @@ dropped as late, `dropped`). A dropped replan is not an underrun (the plan in fo
 on) but an unplanned slowdown: it counts against CLEAN, as the winder counts it.
 
     .venv/bin/python bench/realtime_corpus.py [--methods lp,heuristic] [--paths GLOB,...]
+        [--load N]
+
+--load N runs N busy processes beside the service (a shared, noisy machine: with N = 1
+on 2 cores, every core is busy while the service plans).
 
 Results: bench/results/realtime_corpus.json (wall time ~ the corpus's motion time per
 method).
@@ -22,6 +26,7 @@ from __future__ import annotations
 import argparse
 import fnmatch
 import json
+import multiprocessing as mp
 import sys
 import threading
 import time
@@ -122,16 +127,28 @@ def run(p, method: str) -> dict:
     return row
 
 
+def _spin() -> None:
+    """A busy process (`--load`)."""
+    x = 0
+    while True:
+        x = (x * 1103515245 + 12345) & 0xFFFFFFFF
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--methods", default="lp,heuristic")
     ap.add_argument("--paths", default="*")
     ap.add_argument("--out", default=str(OUT))
+    ap.add_argument("--load", type=int, default=0, help="busy processes beside the service")
     args = ap.parse_args()
     globs = args.paths.split(",")
     methods = [m for m in args.methods.split(",") if m]
-    out: dict = {"meta": {"methods": methods, "time_utc": time.strftime(
+    out: dict = {"meta": {"methods": methods, "load": args.load, "time_utc": time.strftime(
         "%Y-%m-%dT%H:%M:%SZ", time.gmtime())}, "paths": {}}
+    spinners = [mp.get_context("spawn").Process(target=_spin, daemon=True)
+                for _ in range(args.load)]
+    for proc in spinners:
+        proc.start()
     for p in load_corpus("fast", skip_long=True):
         if not any(fnmatch.fnmatch(p.name, g) for g in globs):
             continue
@@ -143,6 +160,8 @@ def main() -> int:
                   f"{r['max_lateness_ms']:+.0f} ms)  dropped {r['dropped']}  fallbacks "
                   f"{r['fallbacks']}  handovers {r['handovers']}  viol {r['violations']}  "
                   f"gaps {r['gaps']}", file=sys.stderr, flush=True)
+    for proc in spinners:
+        proc.terminate()
     FsPath(args.out).write_text(json.dumps(out, indent=1))
     return 0
 

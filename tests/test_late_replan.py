@@ -9,6 +9,7 @@ its `dropped` field, and a replay that drops it too reproduces the stream bit fo
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -18,7 +19,7 @@ import pytest
 
 from lookahead.config import default_config
 from lookahead.protocol import Command, ProtocolError, SetpointBatch, _pack, _unpack
-from lookahead.stream.engine import Engine
+from lookahead.stream.engine import LATE_MOVING_TRIES, Engine
 from lookahead.stream.planners import make_planner
 from lookahead_clients.replay import batch_inputs
 from test_stream_ahead import (
@@ -191,3 +192,60 @@ def test_the_services_budget_ends_before_the_take_over_batch_is_due() -> None:
     svc._clock_job = "another job"
     assert svc._takeover_budget(1000) is None
     svc._planning.shutdown()
+
+
+class SlowPlanner:
+    """A real planner whose calls after the first take `delay` seconds longer."""
+
+    def __init__(self, method: str, delay: float) -> None:
+        self.inner = make_planner(method)
+        self.name = self.inner.name
+        self.delay = delay
+        self.calls = 0
+
+    def plan(self, request):
+        self.calls += 1
+        if self.calls > 1:
+            time.sleep(self.delay)
+        return self.inner.plan(request)
+
+    def __getattr__(self, name: str):
+        return getattr(self.inner, name)
+
+
+#: a replan's extra time and each take-over's budget (s): every replan is late, the
+#: one-batch-at-a-time engine waits `SLOW_BUDGET_S` at each take-over and no longer
+SLOW_REPLAN_S = 0.25
+SLOW_BUDGET_S = 0.08
+
+
+@pytest.mark.parametrize("method", ["heuristic", "lp"])
+def test_a_replan_slower_than_the_restart_is_not_dropped_forever(method) -> None:
+    """Every replan takes longer than any take-over's budget. A dropped replan's
+    computation goes on, and the restart from the rest point it leaves the machine at
+    reuses it (it asks for the same plan): the job goes on after a few drops. Before, each
+    restart queued a new computation behind the dropped one, which could never be done
+    within the budget: dropped forever, the machine at rest for good."""
+    cfg = default_config()
+    planner = SlowPlanner(method, SLOW_REPLAN_S)
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        engine = Engine(cfg, planner, realtime=True, executor=pool)
+        for seg in job_segments():
+            engine.submit(seg)
+        engine.takeover_budget = lambda k: SLOW_BUDGET_S
+        batches = run_to_end(engine, limit=20000)
+    pos = checked(cfg, batches)
+    assert pos.shape[0] == batches[-1].k0 + batches[-1].n
+    assert engine.late_replans > 0 and engine.replans >= 2
+    # per take-over: LATE_MOVING_TRIES moving tries, then restarts from rest while at
+    # most two computations finish (the dropped one and the restart's, which the later
+    # restarts reuse: they call no planner)
+    take_overs = engine.replans - 1
+    per = LATE_MOVING_TRIES + math.ceil(2 * SLOW_REPLAN_S / SLOW_BUDGET_S)
+    assert engine.late_replans <= per * take_overs
+    assert planner.calls <= engine.replans + engine.late_replans  # not one per restart
+    recorded = [SetpointBatch.decode(b.encode()) for b in batches]
+    replayed = replay_batches(recorded, method, drops=True)
+    assert len(replayed) == len(recorded) and all(
+        g.k0 == w.k0 and np.array_equal(g.pos, w.pos) for g, w in zip(replayed, recorded,
+                                                                      strict=True))

@@ -16,7 +16,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from concurrent.futures import Executor, Future
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -68,6 +68,12 @@ class PlanOutcome:
     error: Exception | None = None
     fell_back: bool = False
 
+    def shifted(self, samples: int) -> PlanOutcome:
+        """This outcome with its plan anchored `samples` later (`CommittedPlan.shifted`)."""
+        if self.plan is None or samples == 0:
+            return self
+        return replace(self, plan=self.plan.shifted(samples))
+
 
 def plan_with_fallback(planner: Planner, fallback: Planner, request: PlanRequest, k_plan: int,
                        tail: np.ndarray, check_limits: AxisLimits,
@@ -109,10 +115,50 @@ def ahead_samples(k_last: int, k_end: int, batch: int, dt: float) -> int:
 class PendingPlan:
     """A replan under way: it takes over at sample `k_at` (its profile time 0), from
     `start` (the plan in force's state there) to `s_end`; `final`: the job's final length
-    when it was asked for."""
+    when it was asked for. `request` and `tail` are what `future` computes; it anchors its
+    plan at `k_anchor` (an earlier take-over whose identical computation this one reuses,
+    `same_computation`; else `k_at`)."""
 
     k_at: int
     start: PathState
     s_end: float
     final: float
     future: Future
+    request: PlanRequest | None = None
+    tail: np.ndarray | None = None
+    k_anchor: int | None = None
+
+    def outcome(self) -> PlanOutcome:
+        """The finished computation's outcome, anchored at `k_at`."""
+        outcome: PlanOutcome = self.future.result()
+        return outcome.shifted(self.k_at - (self.k_at if self.k_anchor is None
+                                            else self.k_anchor))
+
+
+def same_computation(pending: PendingPlan, request: PlanRequest, tail: np.ndarray,
+                     final: float) -> bool:
+    """Whether `pending` computes exactly what `request` from rest after `tail` asks for,
+    so that its result, anchored later, is that plan: the same path object, start, end,
+    limits, feed cap and sample time, a start at rest, the same published tail.
+
+    A dropped replan whose worker goes on computing it (`Engine._take_over`) is reused
+    this way by the restart from the same rest point: the restart does not queue behind
+    it. Without that, a replan from rest that takes longer than RESTART_AHEAD_S was
+    dropped again and again (c-fourier-xc-3000pts in real time with the LP, a 0.6 s
+    window: 13 drops in a row, the machine at rest for 2 s)."""
+    old = pending.request
+    if old is None or pending.tail is None or pending.final != final:
+        return False
+    if not (request.start.v == 0.0 and request.start.a == 0.0):
+        return False  # a moving start is never asked for twice (a later k_at moves it)
+    if not (old.path is request.path and old.start == request.start
+            and old.s_end == request.s_end and old.v_end == request.v_end
+            and old.dt == request.dt and np.array_equal(pending.tail, tail)):
+        return False
+    lims = all(np.array_equal(getattr(old.limits, f), getattr(request.limits, f))
+               for f in ("vmax", "amax", "jmax"))
+    a, b = old.feed_cap, request.feed_cap
+    caps = (a is None and b is None) or (
+        a is not None and b is not None and np.array_equal(a.s_breaks, b.s_breaks)
+        and np.array_equal(a.values, b.values))
+    return lims and caps

@@ -106,7 +106,7 @@ import time
 from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import Executor, Future, wait
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -123,6 +123,7 @@ from lookahead.stream.ahead import (
     PlanOutcome,
     ahead_samples,
     plan_with_fallback,
+    same_computation,
 )
 from lookahead.stream.assembler import (
     JobGeometry,
@@ -160,6 +161,12 @@ REPLAN_KEEP = 0.5
 REPLAN_KEEP_BRAKING = 2.0
 #: and no more often than this on new geometry alone
 REPLAN_MIN_S = 0.02
+#: real time: replans computed ahead for a moving take-over dropped in a row (as late)
+#: after which the next one takes over once the plan in force is at rest. Each new try,
+#: a third of the remaining motion ahead, has less time than the last and waits for the
+#: dropped computation: with replans 3x slower than their budget, 12 tries were dropped
+#: on the way to rest (tests/test_late_replan.py)
+LATE_MOVING_TRIES = 2
 #: a job starts when `last` is in, its final geometry covers the horizon, or after this
 START_WAIT_S = 0.5
 #: during an override change that needs a slowdown first, retry the new limits this often
@@ -226,6 +233,9 @@ class _Job:
     end_memo: tuple[float, float] | None = None
     #: real-time mode: the replan under way, which takes over at its `k_at` (stream/ahead.py)
     pending: PendingPlan | None = None
+    #: the last replan dropped as late, whose computation goes on: the next replan reuses
+    #: it if it asks for the same (`ahead.same_computation`), else it is cancelled
+    abandoned: PendingPlan | None = None
 
 
 class Engine:
@@ -699,9 +709,11 @@ class Engine:
             later = -(-(not_before - k_last) // self.batch) * self.batch
             if k_last + later < plan.k_end:
                 ahead = later
-        if ahead <= 0 and job.late and k_last < plan.k_end:
+        if k_last < plan.k_end and job.late and (ahead <= 0 or job.late >= LATE_MOVING_TRIES):
             # after a dropped take-over the worker may still be running it: planning at
             # once would wait for it. Take over once the plan in force is at rest instead
+            # (also after LATE_MOVING_TRIES drops: each try nearer the rest point has less
+            # time, and queues behind the dropped computation)
             ahead = (-(-(plan.k_end - k_last) // self.batch) * self.batch
                      + ahead_samples(plan.k_end, plan.k_end, self.batch, self.dt))
         if ahead <= 0:
@@ -710,13 +722,25 @@ class Engine:
             return
         k_at = k_last + ahead
         start = plan.state(k_at, self.dt)
-        s_end = min(job.geo.final_length, start.s + self.horizon_len)
+        final = job.geo.final_length
+        s_end = min(final, start.s + self.horizon_len)
         request = self._request(job, start, s_end)
         tail = plan.samples(k_at - 2, 3, self.dt).pos
+        old, job.abandoned = job.abandoned, None
+        if old is not None and same_computation(old, request, tail, final):
+            # the dropped computation goes on and takes over here once done (a replay,
+            # which computed it at once, reuses it the same way)
+            k_anchor = old.k_at if old.k_anchor is None else old.k_anchor
+            job.pending = replace(old, k_at=k_at, k_anchor=k_anchor)
+            return
+        if old is not None:
+            # not started: never runs (its planners' forget() is queued after it, so a
+            # replay, which computed it, starts the next replan alike)
+            old.future.cancel()
         future = self.executor.submit(plan_with_fallback, self.planner, self._ahead_fallback,
                                       request, k_at, tail, self.limits, plan)
         self._inflight = future
-        job.pending = PendingPlan(k_at, start, s_end, job.geo.final_length, future)
+        job.pending = PendingPlan(k_at, start, s_end, final, future, request, tail)
 
     def _take_over(self, job: _Job) -> None:
         """The replan under way takes over once its sample k_at is produced: waiting for
@@ -742,10 +766,11 @@ class Engine:
             self.late_replans += 1
             self._dropped.append(pending.k_at)
             job.late += 1
-            # not queued behind a late one (a worker runs its tasks in order); the planners
-            # forget their last plan, computed (a replay) or not (cancelled here), so that
-            # the next replan starts alike in both
-            pending.future.cancel()
+            # its computation goes on: the restart from the same rest point reuses it
+            # (`_replan`), any other replan cancels it if it has not started. The planners
+            # forget their last plan, computed (a replay) or not (cancelled), so that the
+            # next replan starts alike in both
+            job.abandoned = pending
             self._forget_plans()
             plan = job.plan
             assert plan is not None
@@ -755,7 +780,7 @@ class Engine:
                     "rest at k=%d unless a later replan takes over)", pending.k_at, job.id,
                     pending.start.s, plan.k_end)
             return
-        if self._adopt(job, pending.future.result(), pending.start, pending.s_end,
+        if self._adopt(job, pending.outcome(), pending.start, pending.s_end,
                        pending.k_at, pending.final):
             job.starved = False
 

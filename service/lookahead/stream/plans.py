@@ -117,6 +117,12 @@ class CommittedPlan:
                               for f in ("pos", "vel", "acc")))
         return replace(self, cache=fresh, cache_k0=k0, states=mine_all), k_new
 
+    def shifted(self, samples: int) -> CommittedPlan:
+        """The same motion anchored `samples` later (its samples, cached ones included,
+        depend only on k - k_plan)."""
+        return replace(self, k_plan=self.k_plan + samples, k_end=self.k_end + samples,
+                       cache_k0=self.cache_k0 + samples)
+
     def state(self, k: int, dt: float) -> PathState:
         """Path state (s, ds/dt, d2s/dt2) at sample k (end state from k_end on)."""
         if k >= self.k_end:
