@@ -15,7 +15,12 @@ from lookahead.checker import LimitChecker
 from lookahead.config import default_config
 from lookahead.planning.base import PlanRequest, PlanResult
 from lookahead.protocol import Command, Segment, SetpointBatch
-from lookahead.stream.ahead import PLAN_AHEAD_MAX_S, RESTART_AHEAD_S, ahead_samples
+from lookahead.stream.ahead import (
+    BRAKE_LEAD_S,
+    PLAN_AHEAD_MAX_S,
+    RESTART_AHEAD_S,
+    ahead_samples,
+)
 from lookahead.stream.engine import Engine
 from lookahead.stream.planners import make_planner
 
@@ -100,6 +105,31 @@ def test_ahead_samples_are_whole_batches_within_the_shares() -> None:
     assert ahead_samples(100, 100 + 3001, batch, dt) == 1000  # whole batches only
     assert ahead_samples(100, 100 + 29, batch, dt) == 0  # under a batch: plan now
     assert ahead_samples(100, 90, batch, dt) == round(RESTART_AHEAD_S / dt)  # at rest
+    # as late as BRAKE_LEAD_S before the plan's final braking, where that is later
+    lead = round(BRAKE_LEAD_S / dt)
+    assert ahead_samples(100, 3100, batch, dt, k_brake=2600) == 2500 - lead
+    assert ahead_samples(100, 3100, batch, dt, k_brake=1000) == 1000  # the share
+    assert ahead_samples(100, 3100, batch, dt, k_brake=2605) == 2500 - lead  # whole batches
+
+
+@pytest.mark.parametrize("method", ["heuristic", "lp"])
+def test_braking_from_is_where_the_final_deceleration_starts(method: str) -> None:
+    """`CommittedPlan.braking_from`: the path acceleration is < 0 from there to the
+    plan's rest, and >= 0 just before (a plan that accelerates first)."""
+    cfg = default_config()
+    engine = Engine(cfg, make_planner(method), realtime=True)
+    for seg in job_segments():
+        engine.submit(seg)
+    assert engine.next_batch() is not None
+    plan = next(iter(engine._jobs.values())).plan
+    assert plan is not None and plan.k_end > plan.k_plan + 100
+    dt = cfg.machine.dt
+    k_brake = plan.braking_from(dt)
+    acc = plan.profile.at(plan.times(np.arange(plan.k_plan + 1, plan.k_end), dt))[2]
+    i = k_brake - plan.k_plan - 1
+    assert 0 < i < acc.size
+    assert np.all(acc[i:] < 0.0) and acc[i - 1] >= 0.0
+    assert plan.k_end - k_brake > 50  # a braking, not a rounding
 
 
 @pytest.mark.parametrize("method", ["heuristic", "lp"])

@@ -704,7 +704,8 @@ class Engine:
         over `ahead_samples` later, from the plan in force's state there), else now.
         not_before: take over no earlier than this sample where the plan in force still
         moves there (in whole batches; the end of an override's ramp, `_warp_bridge`)."""
-        ahead = ahead_samples(k_last, plan.k_end, self.batch, self.dt) if self.realtime else 0
+        ahead = ahead_samples(k_last, plan.k_end, self.batch, self.dt,
+                              plan.braking_from(self.dt)) if self.realtime else 0
         if ahead > 0 and not_before is not None and k_last + ahead < not_before:
             later = -(-(not_before - k_last) // self.batch) * self.batch
             if k_last + later < plan.k_end:

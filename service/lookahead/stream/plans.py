@@ -117,6 +117,20 @@ class CommittedPlan:
                               for f in ("pos", "vel", "acc")))
         return replace(self, cache=fresh, cache_k0=k0, states=mine_all), k_new
 
+    def braking_from(self, dt: float) -> int:
+        """The first sample of the plan's final braking: from it to k_end the path
+        acceleration stays < 0 (k_plan + 1 if the whole plan brakes)."""
+        k0 = self.k_plan + 1
+        if self.k_end <= k0:
+            return k0
+        st = self.states
+        if st is not None and self.cache_k0 == k0 and st.shape[1] >= self.k_end - k0:
+            acc = st[2, :self.k_end - k0]
+        else:
+            acc = self.profile.at(self.times(np.arange(k0, self.k_end), dt))[2]
+        rising = np.flatnonzero(acc >= 0.0)
+        return k0 + (int(rising[-1]) + 1 if rising.size else 0)
+
     def shifted(self, samples: int) -> CommittedPlan:
         """The same motion anchored `samples` later (its samples, cached ones included,
         depend only on k - k_plan)."""
