@@ -46,6 +46,7 @@ from lookahead.protocol import (
     Status,
     key,
 )
+from lookahead.stalls import StallProbe
 from lookahead.stream.engine import Engine
 from lookahead.stream.pacing import Pacer
 from lookahead.stream.planners import make_planner
@@ -156,6 +157,7 @@ class PlannerService:
         self._out_samples = 0
         self._max_compute_s = 0.0
         self._late_logged = -math.inf  # when a late batch was last logged (monotonic s)
+        self._stalls = StallProbe()  # what held a late batch up (in its WARNING)
         self._job_end_due: float | None = None
         self._held: list[Event] = []  # events waiting for their samples to be published
 
@@ -180,11 +182,13 @@ class PlannerService:
         if not self.fast:
             self._pace_thread = threading.Thread(target=self._pace, name="pacer", daemon=True)
             self._pace_thread.start()
+            self._stalls.start()
         log.info("serving ns=%s planner=%s mode=%s listen=%s connect=%s", self.ns,
                  self.config.planner.method, "fast" if self.fast else "real-time",
                  list(self.config.zenoh.listen), list(self.config.zenoh.connect))
 
     def close(self) -> None:
+        self._stalls.stop()
         self._drain_stop.set()
         with self._out_cv:
             self._out_cv.notify_all()
@@ -387,7 +391,8 @@ class PlannerService:
             if batch.k0 == 0:
                 self.pacer.start(max(now, self._job_end_due or now))
                 self._clock_job = batch.job
-            wait = self.pacer.publish_at(batch.k0) - time.monotonic()
+            publish_at = self.pacer.publish_at(batch.k0)
+            wait = publish_at - time.monotonic()
             if wait > 0:
                 time.sleep(wait)
             now = time.monotonic()
@@ -396,7 +401,8 @@ class PlannerService:
             if late > 0.0 and now >= self._late_logged + 1.0:  # at most once a second
                 self._late_logged = now
                 log.warning("real time: batch k0=%d of job %s published %.3f s after its "
-                            "first sample was due", batch.k0, batch.job, late)
+                            "first sample was due (since its publish time: %s)", batch.k0,
+                            batch.job, late, self._stalls.describe(publish_at))
             self._publish_batch(batch, now)
             if batch.final:
                 self._job_end_due = self.pacer.due_s(batch.k0 + batch.n) - self.pacer.lead_s

@@ -34,8 +34,10 @@ API (stable; the replay client depends on it):
   computed ahead takes over, how long (s, wall clock) the engine may still wait for it;
   None (the default, and fast mode): as long as it takes. A replan not done within its
   budget is dropped: the plan in force goes on (it comes to rest at its window's end if
-  no later replan takes over), a new replan is computed ahead from further along, and the
-  batch lists the dropped take-over in its `dropped` field (`late_replans` counts them).
+  no later replan takes over), a new replan is computed ahead from further along (after
+  LATE_MOVING_TRIES drops, from the plan's rest, reusing the dropped computation where it
+  asks for the same plan), and the batch lists the dropped take-over in its `dropped`
+  field (`late_replans` counts them).
 - `drop_replan(job, k_at)`: replay of a recorded `dropped` take-over.
 
 Replay: for each recorded batch, submit the segments named in its `applied` list and apply
