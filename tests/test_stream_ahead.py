@@ -110,6 +110,11 @@ def test_ahead_samples_are_whole_batches_within_the_shares() -> None:
     assert ahead_samples(100, 3100, batch, dt, k_brake=2600) == 2500 - lead
     assert ahead_samples(100, 3100, batch, dt, k_brake=1000) == 1000  # the share
     assert ahead_samples(100, 3100, batch, dt, k_brake=2605) == 2500 - lead  # whole batches
+    # no cap once the job's geometry is all in (the engine passes cap_s=None then)
+    far = 100 + round(60.0 / dt)
+    assert ahead_samples(100, far, batch, dt, k_brake=far) == round(PLAN_AHEAD_MAX_S / dt)
+    assert ahead_samples(100, far, batch, dt, k_brake=far,
+                         cap_s=None) == far - 100 - lead
 
 
 @pytest.mark.parametrize("method", ["heuristic", "lp"])
@@ -220,3 +225,35 @@ def test_an_override_during_an_lp_replan_under_way_is_bridged_at_once() -> None:
     assert fast.command(Command("override", 0.5)).ok
     run_to_end(fast)
     assert fast.bridges == 0
+
+
+def _take_over_leads(feed: float | None) -> list[int]:
+    """Samples between each replan's request and its take-over, in a real-time engine on
+    `job_segments` (all received at once) with every segment's feed capped at `feed`."""
+    from dataclasses import replace as with_
+
+    engine = Engine(default_config(), make_planner("heuristic"), realtime=True)
+    for seg in job_segments():
+        engine.submit(with_(seg, feed=feed))
+    leads, pending = [], None
+    for _ in range(20000):
+        batch = engine.next_batch()
+        if batch is None:
+            continue
+        job = engine._jobs.get(batch.job)
+        now = None if job is None else job.pending
+        if now is not None and now is not pending:
+            leads.append(now.k_at - (batch.k0 + batch.n - 1))
+        pending = now
+        if batch.final:
+            break
+    return leads
+
+
+def test_once_the_geometry_is_in_a_replan_may_take_over_beyond_the_cap() -> None:
+    """A slow job (feed 20 mm/s: plans of tens of seconds) whose segments are all in:
+    replans take over more than PLAN_AHEAD_MAX_S ahead (there is no geometry to wait for),
+    still before the plan in force's final braking (the job runs to its end)."""
+    cap = round(PLAN_AHEAD_MAX_S / default_config().machine.dt)
+    leads = _take_over_leads(20.0)
+    assert leads and max(leads) > cap

@@ -28,11 +28,14 @@ from lookahead.stream.plans import CommittedPlan, plan_checked
 log = logging.getLogger("lookahead.engine")
 
 #: a moving replan takes over at most this far (s of motion) ahead of the last produced
-#: sample ... It trades how soon new geometry or a longer window is used for how long a
-#: computation may take without holding up the samples: the LP's replans on the 100k-line
-#: winding program (bench/long_program.py, winder3) took up to 3.3 s on a quiet 2-core
-#: machine, with 63 s of motion left in the plan in force; on the fast corpus the longest
-#: replan was 1.25 s (engine-lp, n-butterfly)
+#: sample while the job's geometry is still coming in ... It trades how soon new geometry
+#: or a longer window is used for how long a computation may take without holding up the
+#: samples: the LP's replans on the 100k-line winding program (bench/long_program.py,
+#: winder3) took up to 3.3 s on a quiet 2-core machine, with 63 s of motion left in the
+#: plan in force; on the fast corpus the longest replan was 1.25 s (engine-lp,
+#: n-butterfly). Once the geometry is all in there is nothing to wait for and no cap: two
+#: LP replans of that program took 8.6 s (cold, 2098 nodes) with 58 s of motion left, and
+#: were dropped at the cap (stop 30, real time, quiet machine)
 PLAN_AHEAD_MAX_S = 5.0
 #: ... and at most this share of the motion the plan in force has left (a plan in force
 #: looks ahead >= 2 braking distances when a replan comes, so a third of its time keeps
@@ -111,12 +114,13 @@ def plan_with_fallback(planner: Planner, fallback: Planner, request: PlanRequest
 
 
 def ahead_samples(k_last: int, k_end: int, batch: int, dt: float,
-                  k_brake: int | None = None) -> int:
+                  k_brake: int | None = None, cap_s: float | None = PLAN_AHEAD_MAX_S) -> int:
     """How many samples after the last produced one (`k_last`) a replan of a plan in force
     that comes to rest at `k_end` takes over: a whole number of batches (so that batches
     keep their size), 0 if less than one (then it is planned at once). k_brake: where the
     plan's final braking starts (`CommittedPlan.braking_from`): the take-over may come as
-    late as BRAKE_LEAD_S before it."""
+    late as BRAKE_LEAD_S before it. cap_s: at most this far ahead (None: no cap, for a
+    job whose geometry is all in: PLAN_AHEAD_MAX_S)."""
     left = k_end - k_last
     if left <= 0:
         limit_s = RESTART_AHEAD_S
@@ -124,7 +128,8 @@ def ahead_samples(k_last: int, k_end: int, batch: int, dt: float,
         limit_s = PLAN_AHEAD_SHARE * left * dt
         if k_brake is not None:
             limit_s = max(limit_s, (k_brake - k_last) * dt - BRAKE_LEAD_S)
-        limit_s = min(PLAN_AHEAD_MAX_S, limit_s)
+        if cap_s is not None:
+            limit_s = min(cap_s, limit_s)
     return (int(limit_s / dt + 1e-9) // batch) * batch
 
 

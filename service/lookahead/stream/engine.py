@@ -120,6 +120,7 @@ from lookahead.planning.heuristic import HeuristicPlanner  # at start-up, not pe
 from lookahead.protocol import Command, CommandReply, Event, Segment, SetpointBatch, Status
 from lookahead.sampling import sample_profile
 from lookahead.stream.ahead import (
+    PLAN_AHEAD_MAX_S,
     InlineExecutor,
     PendingPlan,
     PlanOutcome,
@@ -706,8 +707,9 @@ class Engine:
         over `ahead_samples` later, from the plan in force's state there), else now.
         not_before: take over no earlier than this sample where the plan in force still
         moves there (in whole batches; the end of an override's ramp, `_warp_bridge`)."""
-        ahead = ahead_samples(k_last, plan.k_end, self.batch, self.dt,
-                              plan.braking_from(self.dt)) if self.realtime else 0
+        ahead = ahead_samples(
+            k_last, plan.k_end, self.batch, self.dt, plan.braking_from(self.dt),
+            None if job.geo.finished else PLAN_AHEAD_MAX_S) if self.realtime else 0
         if ahead > 0 and not_before is not None and k_last + ahead < not_before:
             later = -(-(not_before - k_last) // self.batch) * self.batch
             if k_last + later < plan.k_end:
