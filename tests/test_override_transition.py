@@ -59,21 +59,24 @@ def run_to_profile_peak(engine: Engine, nu: int, skip: int = 40
                         ) -> tuple[list, int, float]:
     """Submit `job_segments`, take `skip` batches, then run to the first batch boundary at
     or before the sample where the plan in force's derivative `nu` (1: feed, 2: path
-    acceleration) is highest within 1.5 s: the batches so far, that sample, the peak."""
+    acceleration) is highest within 1.5 s: the batches so far, that sample, the peak.
+    Where a replan takes over on the way, the peak is looked for again on it."""
     cfg = engine.config
     dt = cfg.machine.dt
     for seg in job_segments():
         engine.submit(seg)
     batches = [engine.next_batch() for _ in range(skip)]
-    plan = engine._active.plan
-    k_now = batches[-1].k0 + batches[-1].n
-    ks = np.arange(k_now, min(plan.k_end, k_now + 1500))
-    values = plan.profile.at(plan.times(ks, dt))[nu]
-    k_cmd = int(ks[np.argmax(values)])
-    k_cmd -= k_cmd % cfg.service.batch
-    while batches[-1].k0 + batches[-1].n < k_cmd:
-        batches.append(engine.next_batch())
-    return batches, k_cmd, float(np.max(values))
+    while True:
+        plan = engine._active.plan
+        k_now = batches[-1].k0 + batches[-1].n
+        ks = np.arange(k_now, min(plan.k_end, k_now + 1500))
+        values = plan.profile.at(plan.times(ks, dt))[nu]
+        k_cmd = int(ks[np.argmax(values)])
+        k_cmd -= k_cmd % cfg.service.batch
+        while batches[-1].k0 + batches[-1].n < k_cmd and engine._active.plan is plan:
+            batches.append(engine.next_batch())
+        if engine._active.plan is plan:
+            return batches, k_cmd, float(np.max(values))
 
 
 class _Counting:

@@ -11,6 +11,7 @@ import pytest
 
 from lookahead.config import default_config
 from lookahead.limits import AxisLimits
+from lookahead.planning.base import PathState
 from lookahead.protocol import Command
 from lookahead.stream.engine import Engine, stop_ramps
 from lookahead.stream.planners import make_planner
@@ -60,13 +61,15 @@ def test_the_first_stop_ramp_is_the_s_curve_at_the_tangents_limits(v, tangent) -
         assert max(c2 * edge / r1, c2 / r2) == pytest.approx(1.0)
 
 
-def _hold_at_full_feed(engine: Engine) -> list:
-    """Run `job_segments` to the sample of the plan in force's highest feed (after 0.4 s),
-    then send a hold: the batches so far."""
-    batches, k_cmd, _ = run_to_profile_peak(engine, 1)
-    assert engine._active.plan.state(k_cmd - 1, engine.dt).v > 100.0  # mm/s (X, C)
+def _hold_at_full_feed(engine: Engine) -> tuple[list, PathState]:
+    """Run `job_segments` to the sample of the plan in force's highest feed (after 2.1 s,
+    on a replan: the first plan's window ends at rest, so its feed still rises where a
+    replan takes over), then send a hold: the batches so far."""
+    batches, k_cmd, _ = run_to_profile_peak(engine, 1, skip=210)
+    state = engine._active.plan.state(k_cmd - 1, engine.dt)
+    assert state.v > 100.0  # mm/s (X, C)
     assert engine.command(Command("hold")).ok
-    return batches
+    return batches, state
 
 
 @pytest.mark.parametrize("method", ["lp", "heuristic"])
@@ -77,7 +80,8 @@ def test_a_real_time_hold_at_full_feed_calls_no_planner(method) -> None:
     cfg = default_config()
     engine = Engine(cfg, make_planner(method), realtime=True)
     stops = [_Counting(engine.stop_planner), _Counting(engine.stop_search_planner)]
-    batches = _hold_at_full_feed(engine)
+    batches, state = _hold_at_full_feed(engine)
+    assert abs(state.a) < 50.0  # mm/s^2: a cruise
     for _ in range(300):
         batches.append(engine.next_batch())
     assert sum(c.calls for c in stops) == 0

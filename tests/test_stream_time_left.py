@@ -121,18 +121,18 @@ def predicted_ends(pairs: list[tuple[int, Status]], dt: float) -> list[tuple[int
 @pytest.mark.parametrize(("planner", "realtime"), [("heuristic", False), ("lp", True)])
 def test_override_hold_and_resume_are_recomputed_and_holds_not_counted(cfg, planner,
                                                                         realtime):
-    """A job planned to its end from ~0.8 s on (real time ~1.6 s: replans take over ahead
-    of the last sample); commands before calls 100 (real time 180; override 0.6: slower),
-    160 (280; hold), 300 (360; resume) and 360 (420; override 1.0: faster again):
-    false/None from each command until the plan is remade, then one predicted end until
-    the next command, the true end after the last. Real time: an override's end is known
-    once the LP's replan computed ahead takes over from the bridge (`_commit_command`,
-    ~0.7 s later here, call 253 for the override at 180); the hold's rest samples count as
-    job time once they are published, never before."""
+    """A job planned to its end from ~0.8 s on (real time ~2.0 s: replans take over ahead
+    of the last sample, as late as 0.2 s before the plan in force brakes); commands before
+    calls 100 (real time 220; override 0.6: slower), 160 (320; hold), 300 (400; resume)
+    and 360 (460; override 1.0: faster again): false/None from each command until the
+    plan is remade, then one predicted end until the next command, the true end after the
+    last. Real time: an override's end is known once the LP's replan computed ahead takes
+    over from the bridge (`_commit_command`, ~0.7 s later); the hold's rest samples count
+    as job time once they are published, never before."""
     engine = Engine(cfg, make_planner(planner), realtime=realtime)
     for seg in segments("cmds", long_points(300, strokes=1)):
         engine.submit(seg)
-    first, hold, resume, faster = (180, 280, 360, 420) if realtime else (100, 160, 300, 360)
+    first, hold, resume, faster = (220, 320, 400, 460) if realtime else (100, 160, 300, 360)
     script = {first: [Command("override", 0.6)], hold: [Command("hold")],
               resume: [Command("resume")], faster: [Command("override", 1.0)]}
     batches, pairs = run(engine, script)

@@ -707,8 +707,13 @@ class Engine:
         over `ahead_samples` later, from the plan in force's state there), else now.
         not_before: take over no earlier than this sample where the plan in force still
         moves there (in whole batches; the end of an override's ramp, `_warp_bridge`)."""
+        # after an override's ramp (`not_before`) the configured planner takes over as
+        # soon as the ramp ends, not as late as the re-timed plan's braking allows: the
+        # re-timing keeps the new limits only to the checker's rounding where the ramp
+        # joins the time-scaled plan (0.25 % over the jerk limit, heuristic)
         ahead = ahead_samples(
-            k_last, plan.k_end, self.batch, self.dt, plan.braking_from(self.dt),
+            k_last, plan.k_end, self.batch, self.dt,
+            plan.braking_from(self.dt) if not_before is None else None,
             None if job.geo.finished else PLAN_AHEAD_MAX_S) if self.realtime else 0
         if ahead > 0 and not_before is not None and k_last + ahead < not_before:
             later = -(-(not_before - k_last) // self.batch) * self.batch
