@@ -47,3 +47,14 @@ def test_the_account_names_where_another_thread_is() -> None:
     finally:
         go.set()
         worker.join()
+
+
+def test_the_account_never_raises(monkeypatch) -> None:
+    """It runs in the pacer thread: a failure there would stop the batches."""
+    import lookahead.stalls as stalls
+
+    def broken() -> list[str]:
+        raise RuntimeError("dictionary changed size during iteration")
+
+    monkeypatch.setattr(stalls, "thread_places", broken)
+    assert StallProbe().describe(0.0) == "(no account: RuntimeError)"

@@ -54,10 +54,23 @@ class StallProbe:
 
     def gc_since(self, since: float) -> list[tuple[int, float, float]]:
         """The collections that ended after `since` (monotonic s)."""
-        return [p for p in self.pauses if p[1] + p[2] >= since]
+        for _ in range(3):
+            try:
+                pauses = list(self.pauses)
+            except RuntimeError:  # a collection appended while it was copied
+                continue
+            return [p for p in pauses if p[1] + p[2] >= since]
+        return []
 
     def describe(self, since: float) -> str:
-        """Collections since `since` that took >= 1 ms, and where the other threads are."""
+        """Collections since `since` that took >= 1 ms, and where the other threads are
+        (never raises: it runs in the pacer thread)."""
+        try:
+            return self._describe(since)
+        except Exception as exc:  # diagnostics must not stop the batches
+            return f"(no account: {exc.__class__.__name__})"
+
+    def _describe(self, since: float) -> str:
         gcs = [f"gen {g} {1e3 * took:.0f} ms" for g, _, took in self.gc_since(since)
                if took >= 1e-3]
         parts = [f"gc: {', '.join(gcs)}" if gcs else "gc: none >= 1 ms"]
