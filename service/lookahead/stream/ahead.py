@@ -138,23 +138,22 @@ class PendingPlan:
     """A replan under way: it takes over at sample `k_at` (its profile time 0), from
     `start` (the plan in force's state there) to `s_end`; `final`: the job's final length
     when it was asked for. `request` and `tail` are what `future` computes; it anchors its
-    plan at `k_anchor` (an earlier take-over whose identical computation this one reuses,
-    `same_computation`; else `k_at`)."""
+    plan at `k_anchor` (the take-over it was computed for: `k_at`, or an earlier one whose
+    computation this one reuses, `same_computation`)."""
 
     k_at: int
     start: PathState
     s_end: float
     final: float
     future: Future
-    request: PlanRequest | None = None
-    tail: np.ndarray | None = None
-    k_anchor: int | None = None
+    request: PlanRequest
+    tail: np.ndarray
+    k_anchor: int
 
     def outcome(self) -> PlanOutcome:
         """The finished computation's outcome, anchored at `k_at`."""
         outcome: PlanOutcome = self.future.result()
-        return outcome.shifted(self.k_at - (self.k_at if self.k_anchor is None
-                                            else self.k_anchor))
+        return outcome.shifted(self.k_at - self.k_anchor)
 
 
 def same_computation(pending: PendingPlan, request: PlanRequest, tail: np.ndarray,
@@ -169,7 +168,7 @@ def same_computation(pending: PendingPlan, request: PlanRequest, tail: np.ndarra
     dropped again and again (c-fourier-xc-3000pts in real time with the LP, a 0.6 s
     window: 13 drops in a row, the machine at rest for 2 s)."""
     old = pending.request
-    if old is None or pending.tail is None or pending.final != final:
+    if pending.final != final:
         return False
     if not (request.start.v == 0.0 and request.start.a == 0.0):
         return False  # a moving start is never asked for twice (a later k_at moves it)

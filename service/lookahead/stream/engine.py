@@ -740,8 +740,7 @@ class Engine:
         if old is not None and same_computation(old, request, tail, final):
             # the dropped computation goes on and takes over here once done (a replay,
             # which computed it at once, reuses it the same way)
-            k_anchor = old.k_at if old.k_anchor is None else old.k_anchor
-            job.pending = replace(old, k_at=k_at, k_anchor=k_anchor)
+            job.pending = replace(old, k_at=k_at)
             return
         if old is not None:
             # not started: never runs (its planners' forget() is queued after it, so a
@@ -750,7 +749,7 @@ class Engine:
         future = self.executor.submit(plan_with_fallback, self.planner, self._ahead_fallback,
                                       request, k_at, tail, self.limits, plan)
         self._inflight = future
-        job.pending = PendingPlan(k_at, start, s_end, final, future, request, tail)
+        job.pending = PendingPlan(k_at, start, s_end, final, future, request, tail, k_at)
 
     def _take_over(self, job: _Job) -> None:
         """The replan under way takes over once its sample k_at is produced: waiting for

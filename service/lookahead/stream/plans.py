@@ -123,12 +123,7 @@ class CommittedPlan:
         k0 = self.k_plan + 1
         if self.k_end <= k0:
             return k0
-        st = self.states
-        if st is not None and self.cache_k0 == k0 and st.shape[1] >= self.k_end - k0:
-            acc = st[2, :self.k_end - k0]
-        else:
-            acc = self.profile.at(self.times(np.arange(k0, self.k_end), dt))[2]
-        rising = np.flatnonzero(acc >= 0.0)
+        rising = np.flatnonzero(self._raw_states(k0, self.k_end, dt)[2] >= 0.0)
         return k0 + (int(rising[-1]) + 1 if rising.size else 0)
 
     def shifted(self, samples: int) -> CommittedPlan:
