@@ -724,3 +724,82 @@ def test_a_start_accelerating_hard_near_the_job_end_plans():
         pytest.fail(f"the LP failed: {exc}")
     rep = played(path, res.profile, MACHINE.limits, MACHINE.dt)
     assert rep.violations == 0, rep.first
+
+
+def test_elastic_slack_units_skip_row_sides_that_cannot_bind():
+    """A row whose coefficients are rounding noise (an axis that does not move: x_s ~
+    1e-17) reads, after `ScaledLP`'s row scaling, as a bound of ~1e17. Used as a slack's
+    unit it put ~1e16 into the elastic LP's matrix, which HiGHS refuses (status "Empty":
+    the replans braking into the turnaround lock of bench/long_program.py). The slack unit
+    now comes from the row sides that some z within its bounds can meet."""
+    import scipy.sparse as sp
+
+    from lookahead.planning.lp.elastic import elastic_lp, reachable_bounds
+    from lookahead.planning.lp.rows import Rows
+    from lookahead.planning.lp.solve import ScaledLP, make_backend
+
+    n = 4
+    # row 0: conflicts with q_0 = 1 (hard LP infeasible); row 1: noise coefficients
+    A = sp.csr_matrix(np.array([[1.0, 0, 0, 0], [1e-17, 1e-17, 0, 0]]))
+    lo_q, hi_q = np.zeros(n), np.ones(n)
+    lo_q[0] = hi_q[0] = 1.0
+    rows = Rows(A, np.array([-np.inf, -1.0]), np.array([0.5, 1.0]))
+    lp = ScaledLP.build(np.ones(n), lo_q, hi_q, rows)
+    assert abs(lp.row_upper[1]) > 1e15  # the noise row's scaled bound
+    lo, hi, binds = reachable_bounds(lp)
+    assert lo[1] == hi[1] == 0.0 and hi[0] == pytest.approx(0.5)
+    assert binds.tolist() == [True, False]
+    el, _ = elastic_lp(lp, 2)
+    assert np.max(np.abs(el.A.data)) <= 1.0 + 1e-12
+    backend = make_backend("highs")
+    assert not backend.solve(lp).ok
+    out = backend.solve(el)
+    assert out.ok, out.status
+    assert out.q[0] == pytest.approx(1.0)
+
+
+def test_replans_braking_into_a_turnaround_lock_plan():
+    """Replans from the LP's own braking into the turnaround lock of a fiberpath-style
+    program (the carriage X arrives at the mandrel's end within ~2 mm of path while A goes
+    on), each on the plan in force as the engine takes over (the planner's last plan).
+    With the feed-capped windows of the 100k-line program (bench/long_program.py) such
+    states were taken over, and 6 of them failed ("highs: Empty": the elastic LP's slack
+    units, `lp.elastic.reachable_bounds`); here 12 of 70 states 2 ms apart failed."""
+    import tempfile
+    from pathlib import Path
+
+    from lookahead.config import load_config
+    from lookahead.stream.assembler import JobGeometry
+    from lookahead_clients.cam_program import WindingProgram, gcode
+    from lookahead_clients.job_source import load_job, make_segments
+
+    cfg = load_config("winder3")
+    m = cfg.machine
+    prog = WindingProgram(length=300.0, radius=100.0, angle_deg=45.0, circuits=1, hoop=False)
+    with tempfile.TemporaryDirectory() as d:
+        f = Path(d) / "lock.gcode"
+        f.write_text(gcode(prog))
+        src = load_job(str(f), list(m.axes), None, cfg.gcode_options())
+    geo = JobGeometry("lock", tuple(m.axes), np.asarray(m.path_scale), cfg.planner.fit)
+    for seg in make_segments("lock", src.axes, src.points, 200, src.fit or cfg.planner.fit,
+                             src.feeds, None, src.tolerances):
+        geo.add(seg)
+    path = geo.path()
+    s = np.linspace(0.0, path.length, 100_001)
+    s_lock = float(s[np.argmax(path.eval_s(s, order=0)[0][:, 0] >= prog.length - 1e-9)])
+    lim = m.limits.scaled(cfg.planner.margin)
+    cap = geo.feed_cap()
+    first = PlanRequest(path, lim, PathState(s_lock - 150.0), s_lock + 50.0, feed_cap=cap,
+                        dt=m.dt)
+    planner = LPPlanner()
+    profile = planner.plan(first).profile
+    ts = np.arange(0.0, profile.duration, 0.004)
+    s_t, v_t = profile.at(ts)[:2]
+    braking = ts[(s_t > s_lock - 5.0) & (s_t < s_lock) & (v_t > 5.0)]
+    assert braking.size >= 10
+    for t in braking:
+        ss, v, a = (float(x) for x in planner.plan(first).profile.at(np.array([t]))[:3, 0])
+        start = PathState(ss, v, a)
+        res = planner.plan(PlanRequest(path, lim, start, ss + 200.0, feed_cap=cap, dt=m.dt))
+        rep = played(path, res.profile, m.limits, m.dt)
+        assert rep.violations == 0, (start, rep.first)

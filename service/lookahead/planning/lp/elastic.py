@@ -54,16 +54,33 @@ def touching(A: sp.csr_matrix, zone: int) -> np.ndarray:
     return out
 
 
+def reachable_bounds(lp: ScaledLP) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """|row_lower| and |row_upper| of each row of `lp`, 0 where that side cannot bind, and
+    whether some side of the row can bind. A side cannot bind when it
+    is infinite, or looser than the row's reach r = sum_i |A_ri| max(|lower_i|,
+    |upper_i|) (lower < -r or upper > r: no z within its bounds meets it). Why: a row
+    whose coefficients are rounding noise (an axis that does not move: x_s ~ 1e-17)
+    reads, after `ScaledLP`'s row scaling, as a bound of ~1e17; as a slack's unit that
+    put 1.3e16 into the matrix, which HiGHS refuses (status "Empty", measured on a replan
+    braking into the turnaround lock of the 100k-line program)."""
+    zmax = np.maximum(np.abs(lp.lower), np.abs(lp.upper))
+    zmax = np.where(np.isfinite(zmax), zmax, 0.0)  # slack columns: not in the base LP
+    reach = abs(lp.A) @ zmax
+    lo, hi = np.abs(lp.row_lower), np.abs(lp.row_upper)
+    lo_binds = np.isfinite(lp.row_lower) & (lp.row_lower >= -reach)
+    hi_binds = np.isfinite(lp.row_upper) & (lp.row_upper <= reach)
+    return np.where(lo_binds, lo, 0.0), np.where(hi_binds, hi, 0.0), lo_binds | hi_binds
+
+
 def elastic_lp(lp: ScaledLP, zone: int) -> tuple[ScaledLP, int]:
     """`lp` with slack columns on the rows touching its first `zone` variables; returns the
     extended LP and the number of original variables (the q part of the solution)."""
     n = lp.cost.size
-    sel = np.nonzero(touching(lp.A, zone))[0]
+    lo, hi, binds = reachable_bounds(lp)
+    sel = np.nonzero(touching(lp.A, zone) & binds)[0]
     m = sel.size
     if m == 0:
         return lp, n
-    lo = np.where(np.isfinite(lp.row_lower), np.abs(lp.row_lower), 0.0)
-    hi = np.where(np.isfinite(lp.row_upper), np.abs(lp.row_upper), 0.0)
     b = np.maximum(np.maximum(lo, hi)[sel], BOUND_FLOOR)
     rows = np.concatenate([sel, sel])
     cols = n + np.arange(2 * m)
