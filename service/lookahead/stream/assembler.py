@@ -499,6 +499,11 @@ class JobGeometry:
         executed = self._cum_size[done]
         return total[0] - executed[0], total[1] - executed[1]
 
+    @property
+    def segments(self) -> int:
+        """How many segments were added."""
+        return len(self._feeds)
+
     def feed_cap(self, scale: float = 1.0) -> FeedCap | None:
         """Per-segment `feed` caps times `scale` over s (None if no segment has one)."""
         if all(f is None for f in self._feeds):

@@ -54,7 +54,9 @@ which the configured planner's replan computed ahead takes over: the plan in for
 to the new override, `_warp_bridge`, else the stop planner's plan, `_commit_command`; a
 hold, abort or fault stop in real time: the plan in force re-timed to rest where that
 stops within a rough braking guess, else the shortest-stop search below it) and
-ends at rest inside final geometry, at min(final length, s + horizon); every plan is
+ends at rest inside final geometry, at min(final length, s + window): the window is
+horizon_s of motion at the nominal top feed, or at the highest segment feed cap over it
+where the caps hold the feed below the top feed (`_window`); every plan is
 checked with the finite-difference checker against the published tail before it is
 committed. If the configured planner fails, the
 stop planner (heuristic) gets the same request (`fallbacks` counts these); if both fail,
@@ -115,7 +117,7 @@ import numpy as np
 from lookahead.checker import check_positions
 from lookahead.config import Config
 from lookahead.limits import AxisLimits
-from lookahead.planning.base import PathState, Planner, PlanRequest, PlanResult
+from lookahead.planning.base import FeedCap, PathState, Planner, PlanRequest, PlanResult
 from lookahead.planning.heuristic import HeuristicPlanner  # at start-up, not per job
 from lookahead.protocol import Command, CommandReply, Event, Segment, SetpointBatch, Status
 from lookahead.sampling import sample_profile
@@ -236,6 +238,10 @@ class _Job:
     end_memo: tuple[float, float] | None = None
     #: real-time mode: the replan under way, which takes over at its `k_at` (stream/ahead.py)
     pending: PendingPlan | None = None
+    #: (key, feed cap) of `Engine._window`: the key is (override, segments, final length)
+    cap_memo: tuple[tuple, FeedCap | None] | None = None
+    #: (plan, how far it may look ahead before a replan is due) (`Engine._plan_keep`)
+    keep_memo: tuple[CommittedPlan, float] | None = None
     #: the last replan dropped as late, whose computation goes on: the next replan reuses
     #: it if it asks for the same (`ahead.same_computation`), else it is cancelled
     abandoned: PendingPlan | None = None
@@ -284,6 +290,8 @@ class Engine:
         self.batch = config.service.batch
         self.margin = config.planner.margin
         self.horizon_len = horizon_length(self.limits, self.path_scale, config.planner.horizon_s)
+        self.horizon_s = config.planner.horizon_s
+        self._top_feed = float(np.linalg.norm(self.limits.vmax * self.path_scale))
         #: replan (on time or new geometry) only when the plan looks ahead less than this
         self._keep = max(REPLAN_KEEP * self.horizon_len,
                          REPLAN_KEEP_BRAKING * braking_distance(self.limits, self.path_scale))
@@ -733,7 +741,7 @@ class Engine:
         k_at = k_last + ahead
         start = plan.state(k_at, self.dt)
         final = job.geo.final_length
-        s_end = min(final, start.s + self.horizon_len)
+        s_end = min(final, start.s + self._window(job, start.s)[0])
         request = self._request(job, start, s_end)
         tail = plan.samples(k_at - 2, 3, self.dt).pos
         old, job.abandoned = job.abandoned, None
@@ -827,14 +835,14 @@ class Engine:
                 if k_last - job.last_try >= self._retry:
                     job.last_try = k_last
                     state = plan.state(k_last, self.dt)
-                    target = min(geo.final_length, state.s + self.horizon_len)
+                    target = min(geo.final_length, state.s + self._window(job, state.s)[0])
                     if target > state.s and self._commit_command(job, state, target, k_last):
                         job.stop = None
                 return
         if job.override_pending:
             job.override_pending = False
             state = plan.state(k_last, self.dt)
-            target = min(geo.final_length, state.s + self.horizon_len)
+            target = min(geo.final_length, state.s + self._window(job, state.s)[0])
             if target > state.s + self._tol(job) and not self._warp_bridge(
                     job, k_last, state, target) and not self._commit_command(
                     job, state, target, k_last):
@@ -850,7 +858,7 @@ class Engine:
             return  # the plan reaches the end of the finished path (see below)
         if not (at_rest or job.force_replan):
             s = plan.s_at(k_last, self.dt)
-            if plan.s_end - s > self._keep:
+            if plan.s_end - s > self._plan_keep(job, plan):
                 if not geo.finished:
                     return  # it looks ahead more than `_keep`, no window reaches the end
                 final, tol = self._finished_end(job)
@@ -860,7 +868,7 @@ class Engine:
         final = geo.final_length
         if at_rest and plan.s_end >= final - self._tol(job) and geo.freeze():
             final = geo.final_length
-        target = min(final, state.s + self.horizon_len)
+        target = min(final, state.s + self._window(job, state.s)[0])
         if target <= plan.s_end + self._tol(job):
             if geo.finished and final <= plan.s_end + self._tol(job):
                 # finished geometry does not change: every later target (<= final) is
@@ -871,7 +879,8 @@ class Engine:
         # the window reaches the job's end: plan it now (its exact time left, status
         # `plan_complete`), else only once the plan in force looks ahead <= REPLAN_KEEP
         to_end = geo.finished and target >= final - self._tol(job)
-        if not (at_rest or job.force_replan or to_end) and plan.s_end - state.s > self._keep:
+        if not (at_rest or job.force_replan or to_end) and (
+                plan.s_end - state.s > self._plan_keep(job, plan)):
             return
         changed = final > job.planned_final + self._tol(job)
         due = at_rest or job.force_replan or since >= self._every
@@ -880,10 +889,43 @@ class Engine:
         if due or (changed and since >= self._min_gap):
             self._replan(job, plan, k_last, state, target)
 
+    def _window(self, job: _Job, s: float) -> tuple[float, float]:
+        """The look-ahead window from s (path units) and how far a plan in force may look
+        ahead before a replan is due (`REPLAN_KEEP`). The window is `horizon_len`
+        (horizon_s at the nominal top feed), shorter where the job's segment feeds cap the
+        feed below the top feed over all of it: horizon_s at the highest capped feed there,
+        and at least three braking distances from it (DESIGN.md: W >= 3 braking distances
+        lost no time). Both in the nominal time frame (the cap over the override's time
+        scale f), so that, like `horizon_len`, the window does not change with the
+        override. Why: a G-code feed of 100 mm/s on the three-drive winder made 9355 mm
+        windows, 93 s of motion and ~2000 LP nodes; their cold LPs took up to 8.6 s,
+        longer than any replan's lead (bench/long_program.py)."""
+        key = (self.override, job.geo.segments, job.geo.final_length)
+        if job.cap_memo is None or job.cap_memo[0] != key:
+            job.cap_memo = (key, job.geo.feed_cap(self.override))
+        cap = job.cap_memo[1]
+        if cap is None:
+            return self.horizon_len, self._keep
+        lo = max(int(np.searchsorted(cap.s_breaks, s, side="right")) - 1, 0)
+        hi = max(int(np.searchsorted(cap.s_breaks, s + self.horizon_len)), lo + 1)
+        v_top = float(np.max(cap.values[lo:hi])) / min(self.override, 1.0)
+        if not v_top < self._top_feed:
+            return self.horizon_len, self._keep
+        brake = braking_distance(self.limits, self.path_scale, v_top)
+        window = min(self.horizon_len, max(self.horizon_s * v_top, 3.0 * brake))
+        return window, max(REPLAN_KEEP * window, REPLAN_KEEP_BRAKING * brake)
+
+    def _plan_keep(self, job: _Job, plan: CommittedPlan) -> float:
+        """`_window`'s keep at the start of `plan`'s stretch (memoized per plan)."""
+        if job.keep_memo is None or job.keep_memo[0] is not plan:
+            job.keep_memo = (plan, self._window(job, float(plan.profile.at(
+                np.array([0.0]))[0, 0]))[1])
+        return job.keep_memo[1]
+
     def _first_plan(self, job: _Job) -> None:
         path = job.geo.path()
         assert path is not None
-        target = min(job.geo.final_length, self.horizon_len)
+        target = min(job.geo.final_length, self._window(job, 0.0)[0])
         job.plan = rest_plan(path, 0.0, 0)
         if target > self._tol(job) and not self._commit(job, PathState(0.0), target, 0):
             self._fault_job(job, f"planning: no valid plan from the start of job {job.id!r}")
@@ -1194,12 +1236,14 @@ def stop_reach(state: PathState, limits: AxisLimits, tangent: np.ndarray) -> flo
     return braking_guess(state.v, state.a, *_along(limits, tangent))
 
 
-def braking_distance(limits: AxisLimits, path_scale: np.ndarray) -> float:
-    """S-curve braking distance (path units) from the nominal top feed ||vmax path_scale||
-    to rest at the smallest path-level acceleration and jerk (min over the axes of
-    amax path_scale, jmax path_scale). The same at any override: the override scales v, a,
-    j by f, f^2, f^3, which leaves this distance unchanged."""
-    v = float(np.linalg.norm(limits.vmax * path_scale))
+def braking_distance(limits: AxisLimits, path_scale: np.ndarray,
+                     v: float | None = None) -> float:
+    """S-curve braking distance (path units) from the feed v (default: the nominal top
+    feed ||vmax path_scale||) to rest at the smallest path-level acceleration and jerk
+    (min over the axes of amax path_scale, jmax path_scale). From the top feed the same at
+    any override: the override scales v, a, j by f, f^2, f^3, which leaves it unchanged."""
+    if v is None:
+        v = float(np.linalg.norm(limits.vmax * path_scale))
     a = float(np.min(limits.amax * path_scale))
     j = float(np.min(limits.jmax * path_scale))
     return v * (v / a + a / j) / 2.0 if v >= a * a / j else v * math.sqrt(v / j)
