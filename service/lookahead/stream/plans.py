@@ -29,6 +29,12 @@ from lookahead.sampling import Samples, sample_profile
 
 #: relative tolerance on arc lengths (fraction of the path length, at least 1 unit)
 S_TOL = 1e-9
+#: `CommittedPlan.braking_from` looks for the final braking above this share of the plan's
+#: peak feed: an LP window's plan crawls into its end (1.7 mm/s after braking from 100,
+#: its acceleration swinging around 0), and the wiggle there put the real-time take-over
+#: 0.3 s before the end, deep in the braking: dips to 5 mm/s mid-stroke (+0.6 % on
+#: cam-feed-w3-F6000-L300-R100-a45-hoop, bench/corpus/gcode_feeds.py)
+BRAKE_CRAWL_SHARE = 0.05
 
 
 @dataclass(frozen=True)
@@ -119,11 +125,13 @@ class CommittedPlan:
 
     def braking_from(self, dt: float) -> int:
         """The first sample of the plan's final braking: from it to k_end the path
-        acceleration stays < 0 (k_plan + 1 if the whole plan brakes)."""
+        acceleration stays < 0 wherever the feed is above BRAKE_CRAWL_SHARE of the plan's
+        peak (k_plan + 1 if the whole plan brakes)."""
         k0 = self.k_plan + 1
         if self.k_end <= k0:
             return k0
-        rising = np.flatnonzero(self._raw_states(k0, self.k_end, dt)[2] >= 0.0)
+        _, v, a = self._raw_states(k0, self.k_end, dt)
+        rising = np.flatnonzero((a >= 0.0) & (v > BRAKE_CRAWL_SHARE * float(np.max(v))))
         return k0 + (int(rising[-1]) + 1 if rising.size else 0)
 
     def shifted(self, samples: int) -> CommittedPlan:
