@@ -297,7 +297,8 @@ def run_bound(p) -> dict:
     path = p.path()
     grid = int(min(max(2 * p.npoints, BOUND_GRID[0]), BOUND_GRID[1]))
     t0 = time.perf_counter()
-    bound = toppra_time_bound(path, p.config.machine.limits, gridpoints=grid)
+    bound = toppra_time_bound(path, p.config.machine.limits, gridpoints=grid,
+                              feed_cap=p.geometry().feed_cap())
     return {"bound_s": bound, "compute_s": time.perf_counter() - t0, "gridpoints": grid}
 
 
@@ -653,7 +654,8 @@ def main(argv: list[str] | None = None) -> int:
                    "cpu_count": os.cpu_count(),
                    "judged_by": "lookahead.checker at the full limits; plans at limits x "
                                 "planner.margin",
-                   "bound": "lookahead.planning.bounds.toppra_time_bound (v+a, full limits)"}
+                   "bound": "lookahead.planning.bounds.toppra_time_bound (v+a, full limits, "
+                            "the segments' feed caps)"}
     doc["summary"] = summ
     out_path.write_text(json.dumps(doc, indent=1, default=float))
     if not args.no_plot:

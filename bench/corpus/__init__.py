@@ -9,7 +9,8 @@ deterministic, nothing large committed), for tests and `bench/corpus_bench.py`.
 
 Families: `winding` (bench/corpus/winding.py), `cam` (fiberpath G-code, cam.py), `cnc`
 (random smooth paths, cusps, corners, NURBS test curves, tiny and huge paths: cnc.py,
-nurbs_curves.py).
+nurbs_curves.py); G-code jobs whose F words cap the feed (gcode_feeds.py, in the cam and
+cnc families).
 """
 
 from __future__ import annotations
@@ -24,9 +25,10 @@ __all__ = ["FAMILIES", "SUBSETS", "CorpusPath", "load_corpus"]
 
 
 def _everything() -> list[CorpusPath]:
-    from bench.corpus import cam, cnc, nurbs_curves, winding
+    from bench.corpus import cam, cnc, gcode_feeds, nurbs_curves, winding
 
-    paths = [*winding.corpus(), *cam.corpus(), *cnc.corpus(), *nurbs_curves.corpus()]
+    paths = [*winding.corpus(), *cam.corpus(), *cnc.corpus(), *nurbs_curves.corpus(),
+             *gcode_feeds.corpus()]
     names = [p.name for p in paths]
     dupes = sorted({n for n in names if names.count(n) > 1})
     if dupes:
