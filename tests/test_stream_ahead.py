@@ -292,3 +292,46 @@ def test_once_the_geometry_is_in_a_replan_may_take_over_beyond_the_cap() -> None
     cap = round(PLAN_AHEAD_MAX_S / default_config().machine.dt)
     leads = _take_over_leads(20.0, horizon_s=30.0)
     assert leads and max(leads) > cap
+
+
+def test_take_overs_avoid_the_plan_in_forces_hard_braking(monkeypatch) -> None:
+    """Real time: a replan computed ahead takes over where the plan in force does not
+    decelerate (above TAKE_OVER_BRAKING_SHARE of its strongest deceleration), where a
+    whole batch between half of `ahead_samples`' lead and all of it allows. On the
+    feed-capped F20000 winding program with the LP, the plain take-overs (0.2 s before
+    the plan's final braking) fell in its slowdown 107 times of 110; replans from braking
+    states were the LP's slowest and least robust."""
+    from bench.corpus import load_corpus
+
+    import lookahead.stream.engine as engine_module
+
+    p = load_corpus("all", pattern="cam-feed-w3-F20000-*")[0]
+    share = engine_module.TAKE_OVER_BRAKING_SHARE
+
+    def take_overs() -> tuple[int, int]:
+        """(take-overs, how many of them in the plan in force's hard braking)."""
+        engine = Engine(p.config, make_planner("lp"), realtime=True)
+        for seg in p.segments:
+            engine.submit(seg)
+        count = hard = 0
+        pending = None
+        for _ in range(1_000_000):
+            batch = engine.next_batch()
+            if batch is None:
+                continue
+            job = engine._jobs.get(batch.job)
+            now = None if job is None else job.pending
+            if now is not None and now is not pending:
+                count += 1
+                hard += bool(job.plan.braking_hard(np.array([now.k_at]), engine.dt,
+                                                   share)[0])
+            pending = now
+            if batch.final:
+                return count, hard
+        raise AssertionError("the job did not finish")
+
+    count, hard = take_overs()
+    assert count >= 50 and hard <= 2
+    monkeypatch.setattr(engine_module, "TAKE_OVER_BRAKING_SHARE", float("inf"))
+    count, hard = take_overs()  # the rule off: no state counts as braking
+    assert count >= 50 and hard > count // 2

@@ -134,6 +134,17 @@ class CommittedPlan:
         rising = np.flatnonzero((a >= 0.0) & (v > BRAKE_CRAWL_SHARE * float(np.max(v))))
         return k0 + (int(rising[-1]) + 1 if rising.size else 0)
 
+    def braking_hard(self, ks: np.ndarray, dt: float, share: float) -> np.ndarray:
+        """Whether the plan brakes at samples ks (before k_end) harder than `share` of its
+        own strongest deceleration (path acceleration < -share max(-a) over the plan)."""
+        k0 = self.k_plan + 1
+        if self.k_end <= k0:
+            return np.zeros(np.size(ks), dtype=bool)
+        a_all = self._raw_states(k0, self.k_end, dt)[2]
+        strongest = float(np.max(-a_all, initial=0.0))
+        i = np.clip(np.asarray(ks) - k0, 0, a_all.size - 1)
+        return (strongest > 0.0) & (a_all[i] < -share * strongest)
+
     def shifted(self, samples: int) -> CommittedPlan:
         """The same motion anchored `samples` later (its samples, cached ones included,
         depend only on k - k_plan)."""
