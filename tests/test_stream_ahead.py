@@ -257,6 +257,23 @@ def test_an_override_during_an_lp_replan_under_way_is_bridged_at_once() -> None:
     assert fast.bridges == 0
 
 
+def new_take_overs(engine: Engine, calls: int = 1_000_000):
+    """Run a real-time engine up to its final batch (at most `calls` calls); yield (the
+    last produced sample, the plan in force, the replan under way) for each new replan."""
+    pending = None
+    for _ in range(calls):
+        batch = engine.next_batch()
+        if batch is None:
+            continue
+        job = engine._jobs.get(batch.job)
+        now = None if job is None else job.pending
+        if now is not None and now is not pending:
+            yield batch.k0 + batch.n - 1, job.plan, now
+        pending = now
+        if batch.final:
+            return
+
+
 def _take_over_leads(feed: float | None, horizon_s: float | None = None) -> list[int]:
     """Samples between each replan's request and its take-over, in a real-time engine on
     `job_segments` (all received at once) with every segment's feed capped at `feed`
@@ -269,19 +286,7 @@ def _take_over_leads(feed: float | None, horizon_s: float | None = None) -> list
     engine = Engine(cfg, make_planner("heuristic"), realtime=True)
     for seg in job_segments():
         engine.submit(with_(seg, feed=feed))
-    leads, pending = [], None
-    for _ in range(20000):
-        batch = engine.next_batch()
-        if batch is None:
-            continue
-        job = engine._jobs.get(batch.job)
-        now = None if job is None else job.pending
-        if now is not None and now is not pending:
-            leads.append(now.k_at - (batch.k0 + batch.n - 1))
-        pending = now
-        if batch.final:
-            break
-    return leads
+    return [pending.k_at - k_last for k_last, _, pending in new_take_overs(engine, 20000)]
 
 
 def test_once_the_geometry_is_in_a_replan_may_take_over_beyond_the_cap() -> None:
@@ -313,22 +318,9 @@ def test_take_overs_avoid_the_plan_in_forces_hard_braking(monkeypatch) -> None:
         engine = Engine(p.config, make_planner("lp"), realtime=True)
         for seg in p.segments:
             engine.submit(seg)
-        count = hard = 0
-        pending = None
-        for _ in range(1_000_000):
-            batch = engine.next_batch()
-            if batch is None:
-                continue
-            job = engine._jobs.get(batch.job)
-            now = None if job is None else job.pending
-            if now is not None and now is not pending:
-                count += 1
-                hard += bool(job.plan.braking_hard(np.array([now.k_at]), engine.dt,
-                                                   share)[0])
-            pending = now
-            if batch.final:
-                return count, hard
-        raise AssertionError("the job did not finish")
+        hard = [bool(plan.braking_hard(np.array([pending.k_at]), engine.dt, share)[0])
+                for _, plan, pending in new_take_overs(engine)]
+        return len(hard), sum(hard)
 
     count, hard = take_overs()
     assert count >= 50 and hard <= 2
