@@ -766,30 +766,11 @@ def test_replans_braking_into_a_turnaround_lock_plan():
     states were taken over, and 6 of them failed ("highs: Empty": the elastic LP's slack
     units, `lp.elastic.reachable_bounds`). Of 61 states 2 ms apart on this braking, 12
     failed (0 now); the test replans from every other one."""
-    import tempfile
-    from pathlib import Path
+    from cam_paths import lock_program
 
-    from lookahead.config import load_config
-    from lookahead.stream.assembler import JobGeometry
-    from lookahead_clients.cam_program import WindingProgram, gcode
-    from lookahead_clients.job_source import load_job, make_segments
-
-    cfg = load_config("winder3")
-    m = cfg.machine
-    prog = WindingProgram(length=300.0, radius=100.0, angle_deg=45.0, circuits=1, hoop=False)
-    with tempfile.TemporaryDirectory() as d:
-        f = Path(d) / "lock.gcode"
-        f.write_text(gcode(prog))
-        src = load_job(str(f), list(m.axes), None, cfg.gcode_options())
-    geo = JobGeometry("lock", tuple(m.axes), np.asarray(m.path_scale), cfg.planner.fit)
-    for seg in make_segments("lock", src.axes, src.points, 200, src.fit or cfg.planner.fit,
-                             src.feeds, None, src.tolerances):
-        geo.add(seg)
-    path = geo.path()
-    s = np.linspace(0.0, path.length, 100_001)
-    s_lock = float(s[np.argmax(path.eval_s(s, order=0)[0][:, 0] >= prog.length - 1e-9)])
-    lim = m.limits.scaled(cfg.planner.margin)
-    cap = geo.feed_cap()
+    prog = lock_program()
+    path, cap, s_lock, m = prog.path, prog.cap, prog.s_lock, prog.config.machine
+    lim = m.limits.scaled(prog.config.planner.margin)
     first = PlanRequest(path, lim, PathState(s_lock - 150.0), s_lock + 50.0, feed_cap=cap,
                         dt=m.dt)
     planner = LPPlanner()
