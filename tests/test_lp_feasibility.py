@@ -785,3 +785,22 @@ def test_replans_braking_into_a_turnaround_lock_plan():
         res = planner.plan(PlanRequest(path, lim, start, ss + 200.0, feed_cap=cap, dt=m.dt))
         rep = played(path, res.profile, m.limits, m.dt)
         assert rep.violations == 0, (start, rep.first)
+
+
+def test_a_stalled_first_jerk_pass_is_relinearized():
+    """The 1500-point butterfly's first window from rest: on the limit-curve grid (nodes
+    0.014 mm apart near s = 285.4) the first jerk pass pinned two adjacent free nodes at
+    q = 0 (an infinite grid time) and `_unstall` did not lift them: "the jerk LP has no
+    solution", a fallback since the limit-curve grid landed. Those nodes are linearized
+    higher and solved again (`STALL_PASSES`)."""
+    from bench.corpus import load_corpus
+
+    p = load_corpus("all", pattern="n-butterfly-points-1500")[0]
+    m = p.config.machine
+    path = p.path()
+    req = PlanRequest(path, m.limits.scaled(p.config.planner.margin), PathState(0.0),
+                      382.859, feed_cap=p.geometry().feed_cap(), dt=m.dt)
+    res = LPPlanner().plan(req)
+    assert float(res.profile.s_of_t(res.profile.s_of_t.x[-1])) == pytest.approx(382.859)
+    rep = played(path, res.profile, m.limits, m.dt)
+    assert rep.violations == 0, rep.first

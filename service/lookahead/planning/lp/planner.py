@@ -169,6 +169,10 @@ STALL_REF = 1e-3
 #: repair (fraction of the cap): without it, overshoots of 1e-5 took repair rounds from
 #: the jerk, and the whole-job LP failed on 4 of the 5 G-code paths of the corpus
 FEED_CAP_TOL = 0.005
+#: jerk passes that may re-linearize a stalled first solution (`solve_grid`): the
+#: 1500-point butterfly's first window stalled two adjacent nodes 0.014 mm apart on the
+#: limit-curve grid ("the jerk LP has no solution", a fallback since a31aa5c)
+STALL_PASSES = 2
 #: floor attempts in `_unstall` (each one 4x lower after an infeasible one)
 STALL_FLOOR_TRIES = 4
 
@@ -959,6 +963,14 @@ class LPPlanner:
             q = self._unstall(plan, weight, q, q_lo, q_hi, rows, fixed)
             t = grid_time(geo.s, q)
             plan.pass_times.append(t)
+            if not np.isfinite(t) and best_q is None and k < STALL_PASSES:
+                # a stalled run (adjacent free nodes at q = 0) that `_unstall` did not
+                # lift: the jerk rows linearized at q_star pin them, so linearize those
+                # nodes higher (halfway to q_hi, geometrically) and solve again
+                zero = free & (q <= q_floor)
+                q_star = np.where(zero, np.sqrt(np.maximum(q_star, q_floor) * q_hi), q_star)
+                k += 1
+                continue
             if t >= best_t * (1.0 - 1e-4):
                 break
             used = np.maximum(q_star, q_floor)
