@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import tempfile
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -13,7 +11,7 @@ from lookahead.geometry.base import Path as GeoPath
 from lookahead.planning.base import FeedCap
 from lookahead.stream.assembler import JobGeometry
 from lookahead_clients.cam_program import WindingProgram, gcode
-from lookahead_clients.job_source import load_job, make_segments
+from lookahead_clients.job_source import gcode_source, make_segments
 
 
 @dataclass
@@ -33,10 +31,7 @@ def lock_program(length: float = 300.0) -> LockProgram:
     m = cfg.machine
     prog = WindingProgram(length=length, radius=100.0, angle_deg=45.0, circuits=1,
                           hoop=False)
-    with tempfile.TemporaryDirectory() as d:
-        f = Path(d) / "lock.gcode"
-        f.write_text(gcode(prog))
-        src = load_job(str(f), list(m.axes), None, cfg.gcode_options())
+    src = gcode_source("lock", gcode(prog), cfg.gcode_options())
     geo = JobGeometry("lock", tuple(m.axes), np.asarray(m.path_scale), cfg.planner.fit)
     for seg in make_segments("lock", src.axes, src.points, 200, src.fit or cfg.planner.fit,
                              src.feeds, None, src.tolerances):

@@ -25,9 +25,9 @@ from typing import Any
 from bench.corpus.base import CorpusPath, machine_config, rng_for
 from bench.corpus.cnc import XYZ_LIMITS
 from lookahead.config import Config, build_config
-from lookahead.geometry.gcode import GCODE_FIT, read_gcode
+from lookahead.geometry.gcode import GCODE_FIT
 from lookahead_clients.cam_program import WindingProgram, gcode
-from lookahead_clients.job_source import make_segments
+from lookahead_clients.job_source import gcode_source, make_segments
 
 #: points per segment, as `lookahead publish` sends G-code by default
 CHUNK = 500
@@ -45,9 +45,9 @@ def winder3_config(radius: float) -> Config:
 
 
 def _gcode_segments(job: str, cfg: Config, text: str) -> list:
-    res = read_gcode(text, **cfg.gcode_options())
-    return make_segments(job, list(res.axes), res.points, CHUNK, GCODE_FIT, res.feed, None,
-                         res.tolerance)
+    src = gcode_source(job, text, cfg.gcode_options())
+    return make_segments(job, src.axes, src.points, CHUNK, src.fit or GCODE_FIT, src.feeds,
+                         None, src.tolerances)
 
 
 def _winding_entry(name: str, feed: float, length: float, radius: float, angle: float,

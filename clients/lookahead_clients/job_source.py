@@ -49,21 +49,30 @@ def load_job(source: str, axes: list[str], circuits: int | str | None = None,
     if not path.is_file():
         raise ValueError(f"{source}: neither a preset ({', '.join(PRESETS)}) nor a file")
     if path.suffix.lower() in GCODE_SUFFIXES:
-        from lookahead.geometry.gcode import GCODE_FIT, read_gcode
-
-        res = read_gcode(path.read_text(encoding="utf-8"), **(gcode_options or {"axes": axes}))
-        dropped = "".join(f"; dropped {n} {letter} word(s): no drive for letter {letter}"
-                          for letter, n in (res.ignored or {}).items())
-        return JobSource(path.stem, list(res.axes), res.points, res.feed,
-                         f"G-code {path.name}: {len(res.points)} points "
-                         f"({res.skipped} zero-length moves skipped{dropped}); the program "
-                         f"says {res.programmed_time_s:.1f} s at its F words",
-                         fit=GCODE_FIT, tolerances=res.tolerance)
+        return gcode_source(path.stem, path.read_text(encoding="utf-8"),
+                            gcode_options or {"axes": axes}, path.name)
     from lookahead.geometry.files import load_points_file
 
     file_axes, points = load_points_file(path, axes)
     return JobSource(path.stem, list(file_axes), points, None,
                      f"points file {path.name}: {len(points)} points")
+
+
+def gcode_source(name: str, text: str, gcode_options: dict, filename: str | None = None
+                 ) -> JobSource:
+    """A G-code program's text as a job: `read_gcode` with `gcode_options`
+    (`Config.gcode_options`), streamed with the G-code fit (`GCODE_FIT`), the F words as
+    feed caps and the corner tolerances in force."""
+    from lookahead.geometry.gcode import GCODE_FIT, read_gcode
+
+    res = read_gcode(text, **gcode_options)
+    dropped = "".join(f"; dropped {n} {letter} word(s): no drive for letter {letter}"
+                      for letter, n in (res.ignored or {}).items())
+    return JobSource(name, list(res.axes), res.points, res.feed,
+                     f"G-code {filename or name}: {len(res.points)} points "
+                     f"({res.skipped} zero-length moves skipped{dropped}); the program "
+                     f"says {res.programmed_time_s:.1f} s at its F words",
+                     fit=GCODE_FIT, tolerances=res.tolerance)
 
 
 def default_job_id(name: str) -> str:

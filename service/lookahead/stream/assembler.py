@@ -271,6 +271,10 @@ class JobGeometry:
         self._lo: np.ndarray | None = None
         self._hi: np.ndarray | None = None
         self._feeds: list[float | None] = []
+        #: bumped by every change of the geometry (`add`, `truncate`, `freeze`)
+        self._version = 0
+        #: ((scale, version), feed cap) of the last `feed_cap` call
+        self._cap_memo: tuple[tuple[float, int], FeedCap | None] | None = None
         # running (points, bytes) totals after each taken-in segment
         self._cum_size: list[tuple[int, int]] = [(0, 0)]
 
@@ -291,6 +295,7 @@ class JobGeometry:
             self._add_piece(seg)
         self.kind = family
         self.nsegments += 1
+        self._version += 1
         self._feeds.append(seg.feed)
         n, b = segment_size(seg)
         total = self._cum_size[-1]
@@ -316,6 +321,7 @@ class JobGeometry:
         """End the job at what has been received: the `last` segment, or a seq gap that
         timed out. The path up to the end of what was received becomes final."""
         self.finished = True
+        self._version += 1
         if self._fit is not None and self._fit.npoints >= 2:
             self._fit.finish()
             self._cached = None
@@ -397,6 +403,7 @@ class JobGeometry:
         self._fit = None
         self._chord = 0.0
         self._cached = None
+        self._version += 1
         return True
 
     def _add_piece(self, seg: Segment) -> None:
@@ -499,13 +506,16 @@ class JobGeometry:
         executed = self._cum_size[done]
         return total[0] - executed[0], total[1] - executed[1]
 
-    @property
-    def segments(self) -> int:
-        """How many segments were added."""
-        return len(self._feeds)
-
     def feed_cap(self, scale: float = 1.0) -> FeedCap | None:
-        """Per-segment `feed` caps times `scale` over s (None if no segment has one)."""
+        """Per-segment `feed` caps times `scale` over s (None if no segment has one); the
+        same object until a segment comes in, the path changes or `scale` does (the engine
+        asks for it on every replan and every window decision)."""
+        key = (scale, self._version)
+        if self._cap_memo is None or self._cap_memo[0] != key:
+            self._cap_memo = (key, self._feed_cap(scale))
+        return self._cap_memo[1]
+
+    def _feed_cap(self, scale: float) -> FeedCap | None:
         if all(f is None for f in self._feeds):
             return None
         ends = self.segment_ends_s()

@@ -117,8 +117,9 @@ import numpy as np
 from lookahead.checker import check_positions
 from lookahead.config import Config
 from lookahead.limits import AxisLimits
-from lookahead.planning.base import FeedCap, PathState, Planner, PlanRequest, PlanResult
+from lookahead.planning.base import PathState, Planner, PlanRequest, PlanResult
 from lookahead.planning.heuristic import HeuristicPlanner  # at start-up, not per job
+from lookahead.planning.lp.envelope import braking_distance as s_curve_braking_distance
 from lookahead.protocol import Command, CommandReply, Event, Segment, SetpointBatch, Status
 from lookahead.sampling import sample_profile
 from lookahead.stream.ahead import (
@@ -249,8 +250,6 @@ class _Job:
     end_memo: tuple[float, float] | None = None
     #: real-time mode: the replan under way, which takes over at its `k_at` (stream/ahead.py)
     pending: PendingPlan | None = None
-    #: (key, feed cap) of `Engine._window`: the key is (override, segments, final length)
-    cap_memo: tuple[tuple, FeedCap | None] | None = None
     #: (plan, how far it may look ahead before a replan is due) (`Engine._plan_keep`)
     keep_memo: tuple[CommittedPlan, float] | None = None
     #: the last replan dropped as late, whose computation goes on: the next replan reuses
@@ -754,7 +753,7 @@ class Engine:
         k_at = k_last + ahead
         start = plan.state(k_at, self.dt)
         final = job.geo.final_length
-        s_end = min(final, start.s + self._window(job, start.s)[0])
+        s_end = self._window_end(job, start.s, final)
         request = self._request(job, start, s_end)
         tail = plan.samples(k_at - 2, 3, self.dt).pos
         old, job.abandoned = job.abandoned, None
@@ -859,14 +858,14 @@ class Engine:
                 if k_last - job.last_try >= self._retry:
                     job.last_try = k_last
                     state = plan.state(k_last, self.dt)
-                    target = min(geo.final_length, state.s + self._window(job, state.s)[0])
+                    target = self._window_end(job, state.s, geo.final_length)
                     if target > state.s and self._commit_command(job, state, target, k_last):
                         job.stop = None
                 return
         if job.override_pending:
             job.override_pending = False
             state = plan.state(k_last, self.dt)
-            target = min(geo.final_length, state.s + self._window(job, state.s)[0])
+            target = self._window_end(job, state.s, geo.final_length)
             if target > state.s + self._tol(job) and not self._warp_bridge(
                     job, k_last, state, target) and not self._commit_command(
                     job, state, target, k_last):
@@ -892,7 +891,7 @@ class Engine:
         final = geo.final_length
         if at_rest and plan.s_end >= final - self._tol(job) and geo.freeze():
             final = geo.final_length
-        target = min(final, state.s + self._window(job, state.s)[0])
+        target = self._window_end(job, state.s, final)
         if target <= plan.s_end + self._tol(job):
             if geo.finished and final <= plan.s_end + self._tol(job):
                 # finished geometry does not change: every later target (<= final) is
@@ -924,10 +923,7 @@ class Engine:
         override. Why: a G-code feed of 100 mm/s on the three-drive winder made 9355 mm
         windows, 93 s of motion and ~2000 LP nodes; their cold LPs took up to 8.6 s,
         longer than any replan's lead (bench/long_program.py)."""
-        key = (self.override, job.geo.segments, job.geo.final_length)
-        if job.cap_memo is None or job.cap_memo[0] != key:
-            job.cap_memo = (key, job.geo.feed_cap(self.override))
-        cap = job.cap_memo[1]
+        cap = job.geo.feed_cap(self.override)
         if cap is None:
             return self.horizon_len, self._keep
         lo = max(int(np.searchsorted(cap.s_breaks, s, side="right")) - 1, 0)
@@ -939,6 +935,10 @@ class Engine:
         window = min(self.horizon_len, max(self.horizon_s * v_top, 3.0 * brake))
         return window, max(REPLAN_KEEP * window, REPLAN_KEEP_BRAKING * brake)
 
+    def _window_end(self, job: _Job, s: float, final: float) -> float:
+        """Where a plan from s ends (path units): s plus `_window`, at most `final`."""
+        return min(final, s + self._window(job, s)[0])
+
     def _plan_keep(self, job: _Job, plan: CommittedPlan) -> float:
         """`_window`'s keep at the start of `plan`'s stretch (memoized per plan)."""
         if job.keep_memo is None or job.keep_memo[0] is not plan:
@@ -949,7 +949,7 @@ class Engine:
     def _first_plan(self, job: _Job) -> None:
         path = job.geo.path()
         assert path is not None
-        target = min(job.geo.final_length, self._window(job, 0.0)[0])
+        target = self._window_end(job, 0.0, job.geo.final_length)
         job.plan = rest_plan(path, 0.0, 0)
         if target > self._tol(job) and not self._commit(job, PathState(0.0), target, 0):
             self._fault_job(job, f"planning: no valid plan from the start of job {job.id!r}")
@@ -1268,9 +1268,8 @@ def braking_distance(limits: AxisLimits, path_scale: np.ndarray,
     any override: the override scales v, a, j by f, f^2, f^3, which leaves it unchanged."""
     if v is None:
         v = float(np.linalg.norm(limits.vmax * path_scale))
-    a = float(np.min(limits.amax * path_scale))
-    j = float(np.min(limits.jmax * path_scale))
-    return v * (v / a + a / j) / 2.0 if v >= a * a / j else v * math.sqrt(v / j)
+    return s_curve_braking_distance(v, float(np.min(limits.amax * path_scale)),
+                                    float(np.min(limits.jmax * path_scale)))
 
 
 def _forget_all(planners: list) -> None:

@@ -1134,11 +1134,14 @@ class LPPlanner:
         lim = request.limits
         vcap = np.sqrt(velocity_caps(geo, lim.vmax)) * tight.vel
         vcap = np.minimum(vcap, c1_knot_caps(request.path, geo.s, lim, request.dt))
-        if request.feed_cap is not None:  # a repair's tightening of the velocity factor
-            # (below its initial margin) tightens the cap too
-            vcap = np.minimum(vcap, request.feed_cap.at(geo.s)
-                              * np.minimum(tight.vel / self.margins[0], 1.0))
+        if request.feed_cap is not None:  # the repairs' tightening applies to it too
+            vcap = np.minimum(vcap, request.feed_cap.at(geo.s) * self._repaired(tight))
         return vcap**2
+
+    def _repaired(self, tight: Tightening) -> np.ndarray:
+        """Per node, the repairs' tightening of the velocity factor below its initial
+        margin (1 where no repair tightened it)."""
+        return np.minimum(tight.vel / self.margins[0], 1.0)
 
     def _envelope(self, request: PlanRequest, geo: GridGeometry, tight: Tightening,
                   stop_idx: np.ndarray, include_start: bool = True) -> np.ndarray:
@@ -1220,7 +1223,7 @@ class LPPlanner:
         A, J = start_limits(geo, request.limits)
         room = braking_q(geo.s - geo.s[0], st.v, st.a, self.brake_jerk * J, max(A, -st.a))
         true = self._true_caps(request, geo)
-        factor = np.minimum(tight.vel / self.margins[0], 1.0)
+        factor = self._repaired(tight)
         # a start above the limits keeps the braking's excess over them (the check allows
         # it, `_start_allowance`); elsewhere the room ends at the limits
         if st.v**2 > true[0] * (1.0 + 1e-9):
