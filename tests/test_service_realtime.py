@@ -4,6 +4,7 @@ actually published, not the engine, which produces ahead of publication."""
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -67,3 +68,40 @@ def test_segments_queued_before_a_job_starts_are_all_taken_in_at_once(monkeypatc
     svc._take_in(0.0)
     assert svc._incoming.empty() and svc.stats.segments == len(segs) == 6
     assert svc.engine.status().queued == len(segs)
+
+
+def test_a_jobs_clock_starts_only_once_its_first_batches_are_buffered(monkeypatch):
+    """The job's first batch (its first plan) must not start the clock with 10 ms buffered:
+    the batches after it would wait on the next take-in pass (the 100k-line program underran
+    at its start). The pacer takes a first batch only once the job is primed: as far ahead
+    as the service keeps the buffer, or at the job's end."""
+    import lookahead.service as service_module
+
+    monkeypatch.setattr(service_module, "PRODUCE_MAX_S", 0.0)  # one batch per call
+    monkeypatch.setattr(service_module, "MIN_AHEAD_S", 0.3)
+    svc = PlannerService(service_config(), fast=False)  # never opened: no bus needed
+    t = np.linspace(0.0, 1.0, 400)
+    pts = np.column_stack([600.0 * t, 400.0 * t + 20.0 * np.sin(5 * t)])
+    svc.engine.submit(Segment("prime", 0, ("X", "C"), "points", True, points=pts))
+    calls = 0
+    while not svc._startable():
+        svc._next_poll = 0.0
+        assert svc._produce_paced(time.monotonic()) or svc._out, "nothing was produced"
+        with svc._out_cv:
+            startable = svc._startable()
+        if not startable:
+            assert not svc._out[-1].final
+        calls += 1
+    assert calls > 1  # the first call's single batch did not start the clock
+    assert svc._out[0].k0 == 0 and svc._out[0].job == "prime"
+    assert svc._buffered_s() >= 0.3 or svc._out[-1].final
+    # a short job is primed by its final batch even below the lead
+    monkeypatch.setattr(service_module, "MIN_AHEAD_S", 1e6)
+    svc2 = PlannerService(service_config(), fast=False)
+    svc2.engine.submit(Segment("short", 0, ("X", "C"), "points", True,
+                               points=np.array([[0.0, 0.0], [5.0, 3.0]])))
+    while not svc2._out or not svc2._out[-1].final:
+        assert not svc2._startable()
+        svc2._next_poll = 0.0
+        svc2._produce_paced(time.monotonic())
+    assert svc2._startable()

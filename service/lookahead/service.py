@@ -137,6 +137,9 @@ class PlannerService:
                              realtime=not fast, executor=self._planning)
         self.pacer = Pacer(config.machine.dt, config.service.lead_s)
         self._clock_job: str | None = None  # the job whose first batch started the pacer
+        # real time: jobs whose clock may start (their first batches are buffered far
+        # enough ahead, see _produce_paced); guarded by _out_cv
+        self._primed_jobs: set[str] = set()
         if not fast:
             self.engine.takeover_budget = self._takeover_budget
         self.stats = ServiceStats()
@@ -156,6 +159,7 @@ class PlannerService:
         self._out_cv = threading.Condition()
         self._out_samples = 0
         self._max_compute_s = 0.0
+        self._next_poll = 0.0  # real time: when _produce_paced next looks (monotonic s)
         self._late_logged = -math.inf  # when a late batch was last logged (monotonic s)
         self._stalls = StallProbe()  # what held a late batch up (in its WARNING)
         self._job_end_due: float | None = None
@@ -322,7 +326,8 @@ class PlannerService:
     def _produce_paced(self, now: float) -> bool:
         """Real-time: keep the buffer ahead of publication by the expected compute time,
         producing batches until it is (for at most PRODUCE_MAX_S at a time); the pacer
-        thread publishes each batch lead_s before it is due."""
+        thread publishes each batch lead_s before it is due. A job's clock starts only
+        once it is primed: that far ahead, at its end, or with nothing more to produce."""
         if now < self._next_poll or self._stopping_done():
             return False
         produced = False
@@ -330,14 +335,28 @@ class PlannerService:
         while not produced or time.monotonic() - start < PRODUCE_MAX_S:
             ahead = MIN_AHEAD_S + min(MAX_AHEAD_S, 1.5 * self._max_compute_s)
             if self._buffered_s() >= ahead:
+                self._prime()
                 self._next_poll = now + self.config.service.batch * self.config.machine.dt
                 break
             batch = self._produce_one()
             if batch is None:
+                # the engine has nothing now (it waits for segments): start what is buffered
+                self._prime()
                 self._next_poll = now + self.config.service.batch * self.config.machine.dt
                 break
             produced = True
+            if batch.final:
+                self._prime()
         return produced
+
+    def _prime(self) -> None:
+        """Let the clocks of the jobs buffered so far start. Before this, a job's first
+        batch (its first plan, up to a second) left the loop with 10 ms buffered: the pacer
+        published it at once and the batches after it waited on a take-in pass. The 100k-
+        line program underran 2-3 times, up to 20 ms, at its start (stop 31)."""
+        with self._out_cv:
+            self._primed_jobs.update(b.job for b in self._out if b.k0 == 0)
+            self._out_cv.notify_all()
 
     def _produce_one(self) -> SetpointBatch | None:
         """One batch into the real-time buffer (None if the engine has none now)."""
@@ -379,14 +398,17 @@ class PlannerService:
 
     def _pace(self) -> None:
         """Pacer thread: publish buffered batches at due time - lead_s. A job's clock
-        starts when its first batch is taken (not before the previous job's end)."""
+        starts when its first batch is taken, once the job is primed (`_prime`), and not
+        before the previous job's end."""
         while not self._drain_stop.is_set():
             with self._out_cv:
-                while not self._out and not self._drain_stop.is_set():
+                while not self._drain_stop.is_set() and not self._startable():
                     self._out_cv.wait(0.1)
-                if not self._out:
+                if not self._startable():
                     return
                 batch = self._out[0]
+                if batch.k0 == 0:
+                    self._primed_jobs.discard(batch.job)
             now = time.monotonic()
             if batch.k0 == 0:
                 self.pacer.start(max(now, self._job_end_due or now))
@@ -409,6 +431,11 @@ class PlannerService:
             with self._out_cv:
                 self._out.popleft()
                 self._out_samples -= batch.n
+
+    def _startable(self) -> bool:
+        """The pacer may take the head batch: a running job's, or a primed job's first
+        (call with _out_cv held)."""
+        return bool(self._out) and (self._out[0].k0 > 0 or self._out[0].job in self._primed_jobs)
 
     def _next_batch(self) -> SetpointBatch | None:
         try:
