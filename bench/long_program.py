@@ -46,9 +46,9 @@ def vm_hwm_mb(pid: int) -> float:
     return int(m.group(1)) / 1024 if m else float("nan")
 
 
-def lookahead(*argv, env=None, **kw) -> subprocess.Popen:
+def lookahead(*argv, env=None, stderr=subprocess.PIPE, **kw) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "lookahead", *argv], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
+                            stdout=subprocess.PIPE, stderr=stderr, text=True, **kw)
 
 
 def plan(job: Path, method: str) -> dict:
@@ -81,14 +81,20 @@ def stream(job: Path, method: str, realtime: bool = False) -> dict:
     """publish -> serve --fast -> winder --fast (`realtime`: both on the wall clock, the
     program's whole motion time); the service's peak memory over time."""
     fast = () if realtime else ("--fast",)
+    # RUST_LOG: zenoh's own warnings (a transport closed, a lease expired) in the logs
     env = {**os.environ, "LOOKAHEAD_ZENOH_LISTEN": free_tcp_endpoint(),
-           "LOOKAHEAD_PLANNER_METHOD": method, "PYTHONUNBUFFERED": "1"}
+           "LOOKAHEAD_PLANNER_METHOD": method, "PYTHONUNBUFFERED": "1",
+           "RUST_LOG": os.environ.get("RUST_LOG", "zenoh=warn")}
     env.pop("LOOKAHEAD_ZENOH_CONNECT", None)
-    report = Path(tempfile.mkdtemp()) / "report.json"
+    tmp = Path(tempfile.mkdtemp())
+    report = tmp / "report.json"
+    # stderr to files, not pipes: nothing reads a pipe before the end, and a full one
+    # would block the process writing to it
+    logs = {name: (tmp / f"{name}.log").open("w+") for name in ("service", "winder")}
     service = lookahead("serve", "--config", "winder3", *fast, "--log-level", "WARNING",
-                        env=env)
+                        env=env, stderr=logs["service"])
     winder = lookahead("winder", "--config", "winder3", *fast, "--jobs", "1",
-                       "--report-json", str(report), env=env)
+                       "--report-json", str(report), env=env, stderr=logs["winder"])
     time.sleep(3.0)
     t0 = time.perf_counter()
     pub = lookahead("publish", str(job), "--config", "winder3", "--quiet", "--chunk", "200",
@@ -102,8 +108,17 @@ def stream(job: Path, method: str, realtime: bool = False) -> dict:
     for p in (service, winder):
         if p.poll() is None:
             p.terminate()
-    service_err = service.communicate(timeout=30)[1]
+    service.communicate(timeout=30)
     winder.communicate(timeout=30)
+    text = {}
+    for name, f in logs.items():
+        f.seek(0)
+        text[name] = f.read()
+        f.close()
+    service_err = text["service"]
+    zenoh_log = [f"{name}: {ln}" for name, t in text.items()
+                 for ln in (re.sub(r"\x1b\[[0-9;]*m", "", raw) for raw in t.splitlines())
+                 if re.search(r" (WARN|ERROR) ", ln)]
     rep = json.loads(report.read_text())[-1] if report.exists() else {}
     duration = rep.get("duration_s")
     return {"method": method, "publish_exit": pub.returncode, "wall_s": wall,
@@ -115,7 +130,8 @@ def stream(job: Path, method: str, realtime: bool = False) -> dict:
             "service_peak_rss_mb": max((m for _, m in memory), default=None),
             "service_rss_over_time": memory[:: max(1, len(memory) // 40)],
             "service_warning_count": sum("WARNING" in ln for ln in service_err.splitlines()),
-            "service_warnings": [ln for ln in service_err.splitlines() if "WARNING" in ln][:20]}
+            "service_warnings": [ln for ln in service_err.splitlines() if "WARNING" in ln][:20],
+            "zenoh_warnings": zenoh_log[:40]}
 
 
 def main() -> int:

@@ -33,10 +33,19 @@ def zenoh_config(section: ZenohSection):
     return conf
 
 
+def init_zenoh_logging() -> None:
+    """zenoh's own log (transport closes, lease expiries) on stderr when RUST_LOG is set
+    (e.g. RUST_LOG=zenoh=warn); nothing otherwise. Safe to call more than once."""
+    import zenoh
+
+    zenoh.try_init_log_from_env()
+
+
 def open_session(section: ZenohSection):
     """Open a zenoh session for the service (as configured)."""
     import zenoh
 
+    init_zenoh_logging()
     return zenoh.open(zenoh_config(section))
 
 
@@ -78,6 +87,7 @@ def open_client_session(section: ZenohSection):
     """Open a zenoh session for a client (publisher, winder, recorder, monitor)."""
     import zenoh
 
+    init_zenoh_logging()
     return zenoh.open(zenoh_config(client_section(section)))
 
 
