@@ -22,6 +22,39 @@ def path_limits(path: Path, limits: AxisLimits) -> tuple[float, float]:
     return float(np.min(limits.amax / xmax)), float(np.min(limits.jmax / xmax))
 
 
+#: `envelope_limits`: an axis whose tangent share |x'_k| path_scale_k stays below this over
+#: the window counts at its own largest tangent there, not at the whole tangent ...
+ENVELOPE_AXIS_SHARE = 0.01
+#: ... and only where that lifts the path-level limits more than this factor; below it,
+#: `path_limits`'s conservatism is the LP's margin near rest. Measured: the window's
+#: tangents for every axis changed 45 of 63 corpus paths by -6 % .. +24 % (steeper starts
+#: needing repairs on short paths: c-short-winder-0p8mm 0.131 -> 0.163 s); the share rule
+#: alone lifted the winder3 lock program's envelope 6.7x (its delivery axis B at 0.9 % of
+#: the tangent), and LP replans from the braking into its lock failed on 1 of 61 states
+#: (test_lp_feasibility). c-rand6's raw-metric path needs 1e5 (U's limits against Z's)
+ENVELOPE_LIFT = 10.0
+
+
+def envelope_limits(tangents: np.ndarray, path_scale: np.ndarray, limits: AxisLimits
+                    ) -> tuple[float, float]:
+    """Path acceleration and jerk (path units / s^2, / s^3) for the LP's start/stop
+    envelopes over a window whose nodes have the tangents `tangents` (shape (n, naxes),
+    x'_k): `path_limits` (each axis may carry the whole tangent, |x'_k| <= 1 /
+    path_scale_k), unless the axes that barely move there (share below
+    ENVELOPE_AXIS_SHARE), counted at their largest |x'_k| instead, lift a limit more than
+    ENVELOPE_LIFT times. Why: a path whose small-limit axes barely move (c-rand6 in the raw
+    mm metric: U's limits 1e-6 of Z's) got U's limits as the path's, and the envelopes held
+    the feed to ~40 where the caps allow ~2000 (a plan 99x the v+a bound)."""
+    xmax = 1.0 / np.asarray(path_scale, dtype=float)
+    along = np.max(np.abs(np.asarray(tangents, dtype=float)), axis=0)
+    x = np.where(along < ENVELOPE_AXIS_SHARE * xmax, along, xmax)
+    with np.errstate(divide="ignore"):
+        lifted = float(np.min(limits.amax / x)), float(np.min(limits.jmax / x))
+    worst = float(np.min(limits.amax / xmax)), float(np.min(limits.jmax / xmax))
+    return tuple(new if new > ENVELOPE_LIFT * old else old  # type: ignore[return-value]
+                 for new, old in zip(lifted, worst, strict=True))
+
+
 def braking_distance(v: float, a_max: float, j_max: float) -> float:
     """Distance to stop from feed v at zero acceleration with a jerk-limited S-curve
     (path units): v/2 (v/A + A/J) if v >= A^2/J, else v sqrt(v/J)."""

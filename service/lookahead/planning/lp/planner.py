@@ -75,6 +75,7 @@ from lookahead.planning.lp.elastic import elastic_lp
 from lookahead.planning.lp.envelope import (
     braking_distance,
     braking_q,
+    envelope_limits,
     local_rest_q,
     path_limits,
     reachable_q,
@@ -1147,7 +1148,7 @@ class LPPlanner:
                   stop_idx: np.ndarray, include_start: bool = True) -> np.ndarray:
         """Jerk-limited S-curve bounds on q after the start (unless not `include_start`),
         before a rest end and around interior stops (`lp.envelope`)."""
-        A, J = path_limits(request.path, request.limits)
+        A, J = envelope_limits(geo.d1, request.path.path_scale, request.limits)
         s = geo.s
         # one S-curve per prescribed state, with the tightest factors of its reach
         reach = braking_distance(float(np.sqrt(np.max(velocity_caps(geo, request.limits.vmax)))),
