@@ -6,15 +6,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from ruckig import InputParameter, Result, Ruckig, Trajectory
 
 from lookahead.checker import check_positions
 from lookahead.config import default_config
 from lookahead.geometry import fit_points
-from lookahead.limits import AxisLimits
 from lookahead.planning.base import PathState, PlanRequest
 from lookahead.planning.heuristic import HeuristicPlanner
 from lookahead.sampling import sample_plan
+from motion_bounds import rest_to_rest_duration
 
 DT = 0.001
 #: pchip through these points (X mm, C deg) has both axes at an extremum at the middle
@@ -26,20 +25,6 @@ CUSP_STROKES = [
 ]
 
 
-def _rest_to_rest_duration(displacement: np.ndarray, limits: AxisLimits) -> float:
-    """Time-optimal synchronized straight move from rest to rest at the axis limits (s)."""
-    n = displacement.size
-    inp = InputParameter(n)
-    inp.current_position = [0.0] * n
-    inp.target_position = list(displacement)
-    inp.max_velocity = list(limits.vmax)
-    inp.max_acceleration = list(limits.amax)
-    inp.max_jerk = list(limits.jmax)
-    trajectory = Trajectory(n)
-    assert Ruckig(n).calculate(inp, trajectory) == Result.Working
-    return trajectory.duration
-
-
 @pytest.mark.parametrize("points", CUSP_STROKES, ids=["tiny", "three-strokes", "tall-c"])
 def test_plan_next_to_a_cusp_does_not_crawl(points):
     config = default_config()
@@ -49,7 +34,7 @@ def test_plan_next_to_a_cusp_does_not_crawl(points):
     result = HeuristicPlanner().plan(PlanRequest(path, limits, PathState(0.0), path.length))
     duration = result.profile.duration
     # each stroke between points as a straight rest-to-rest move at the limits
-    reference = sum(_rest_to_rest_duration(step, limits) for step in np.diff(points, axis=0))
+    reference = sum(rest_to_rest_duration(step, limits) for step in np.diff(points, axis=0))
     # duration first: a crawling plan would last thousands of seconds (too long to sample)
     assert duration < 3.0 * reference, (duration, reference)
     report = check_positions(sample_plan(path, result.profile, DT).pos, limits, DT)

@@ -7,23 +7,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import ruckig
 
 from lookahead.geometry import fit_points
 from lookahead.limits import AxisLimits
 from lookahead.planning.base import PathState, PlanRequest
 from lookahead.planning.lp import LPPlanner
 from lookahead.planning.lp.envelope import envelope_limits, path_limits
-
-
-def _rest_to_rest_s(distance: float, v: float, a: float, j: float) -> float:
-    """Ruckig's time-optimal 1-DOF rest-to-rest time over `distance`."""
-    inp = ruckig.InputParameter(1)
-    inp.current_position, inp.target_position = [0.0], [distance]
-    inp.max_velocity, inp.max_acceleration, inp.max_jerk = [v], [a], [j]
-    traj = ruckig.Trajectory(1)
-    assert ruckig.Ruckig(1).calculate(inp, traj) == ruckig.Result.Working
-    return float(traj.duration)
+from motion_bounds import rest_to_rest_duration
 
 
 @pytest.mark.parametrize("small", [1e-4, 1e-6])
@@ -42,7 +32,8 @@ def test_a_barely_moving_small_axis_does_not_slow_the_plan(small: float) -> None
     assert path_limits(path, lim) == pytest.approx((lim.amax[1], lim.jmax[1]))  # U's
     assert pytest.approx((2000.0, 20000.0)) == (A, J)  # X's, where X carries the tangent
     result = LPPlanner().plan(PlanRequest(path, lim, PathState(0.0), path.length))
-    best = _rest_to_rest_s(path.length, 200.0, 2000.0, 20000.0)
+    best = rest_to_rest_duration(np.array([path.length]), AxisLimits(
+        vmax=lim.vmax[:1], amax=lim.amax[:1], jmax=lim.jmax[:1]))  # X alone
     # the margins (0.995 v, 0.98 a, 0.85 j) and the grid cost a few percent; with the
     # envelopes at U's limits the plan took 9.2 s (small 1e-4) and 90.7 s (1e-6), against
     # 2.28 s now and 2.20 s for X alone

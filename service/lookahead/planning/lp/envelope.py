@@ -15,11 +15,19 @@ from lookahead.geometry.base import Path
 from lookahead.limits import AxisLimits
 
 
+def tangent_limits(tangent: np.ndarray, limits: AxisLimits) -> tuple[float, float]:
+    """Path acceleration and jerk (path units / s^2, / s^3) at low feed along a tangent
+    whose axis components are at most `tangent` (|x'_k|, shape (naxes,)): the axis
+    acceleration and jerk there are x'_k a and x'_k j, so min_k amax_k / |x'_k| and
+    min_k jmax_k / |x'_k| (an axis with x'_k = 0 does not bound them)."""
+    with np.errstate(divide="ignore"):
+        return float(np.min(limits.amax / tangent)), float(np.min(limits.jmax / tangent))
+
+
 def path_limits(path: Path, limits: AxisLimits) -> tuple[float, float]:
-    """Conservative path acceleration and jerk (path units / s^2, / s^3) at low feed:
-    the axis acceleration and jerk there are x'_k a and x'_k j, and |x'_k| <= 1/path_scale_k."""
-    xmax = 1.0 / np.asarray(path.path_scale, dtype=float)
-    return float(np.min(limits.amax / xmax)), float(np.min(limits.jmax / xmax))
+    """Conservative `tangent_limits`: any axis may carry the whole tangent,
+    |x'_k| <= 1/path_scale_k."""
+    return tangent_limits(1.0 / np.asarray(path.path_scale, dtype=float), limits)
 
 
 #: `envelope_limits`: an axis whose tangent share |x'_k| path_scale_k stays below this over
@@ -47,10 +55,8 @@ def envelope_limits(tangents: np.ndarray, path_scale: np.ndarray, limits: AxisLi
     the feed to ~40 where the caps allow ~2000 (a plan 99x the v+a bound)."""
     xmax = 1.0 / np.asarray(path_scale, dtype=float)
     along = np.max(np.abs(np.asarray(tangents, dtype=float)), axis=0)
-    x = np.where(along < ENVELOPE_AXIS_SHARE * xmax, along, xmax)
-    with np.errstate(divide="ignore"):
-        lifted = float(np.min(limits.amax / x)), float(np.min(limits.jmax / x))
-    worst = float(np.min(limits.amax / xmax)), float(np.min(limits.jmax / xmax))
+    lifted = tangent_limits(np.where(along < ENVELOPE_AXIS_SHARE * xmax, along, xmax), limits)
+    worst = tangent_limits(xmax, limits)
     return tuple(new if new > ENVELOPE_LIFT * old else old  # type: ignore[return-value]
                  for new, old in zip(lifted, worst, strict=True))
 

@@ -79,6 +79,7 @@ from lookahead.planning.lp.envelope import (
     local_rest_q,
     path_limits,
     reachable_q,
+    tangent_limits,
 )
 from lookahead.planning.lp.grid import (
     build_grid,
@@ -282,9 +283,7 @@ def start_limits(geo: GridGeometry, limits: AxisLimits) -> tuple[float, float]:
     along the tangent at the first node, min_k amax_k / |x'_k| and min_k jmax_k / |x'_k|
     (the curvature terms aside): less conservative than `lp.envelope.path_limits`, which
     assumes the worst tangent (tube-1450's strokes: 27700 against 19600 mm/s^3)."""
-    with np.errstate(divide="ignore"):
-        d1 = np.abs(geo.d1[0])
-        return float(np.min(limits.amax / d1)), float(np.min(limits.jmax / d1))
+    return tangent_limits(np.abs(geo.d1[0]), limits)
 
 
 def default_grid_step(path: Path, limits: AxisLimits, interval_s: float = 0.0045) -> float:
