@@ -142,6 +142,8 @@ class FakePlanner:
         self.session = open_session(cfg.zenoh)
         self.token = self.session.liveliness().declare_token(key(cfg.ns, "alive", "planner"))
         self.pub = publisher(self.session, key(cfg.ns, "setpoints"))
+        # zenoh's advanced publisher has no matching status: a plain one on the key does
+        self.probe = self.session.declare_publisher(key(cfg.ns, "setpoints"))
         self.reports: queue.Queue = queue.Queue()
         subscribe(self.session, key(cfg.ns, "machine", "report"), self.reports)
 
@@ -151,7 +153,7 @@ class FakePlanner:
 
         assert wait_for_token(self.session, key(self.cfg.ns, "alive", "machine"), 10.0)
         deadline = time.monotonic() + 10.0
-        while not self.pub.matching_status.matching:  # the winder's subscription reaches us
+        while not self.probe.matching_status.matching:  # the winder's subscription reaches us
             assert time.monotonic() < deadline, "the winder never subscribed"
             time.sleep(0.02)
 

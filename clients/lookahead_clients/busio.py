@@ -8,6 +8,7 @@ thread ends when the session closes. Liveliness changes arrive on the same queue
 
 from __future__ import annotations
 
+import logging
 import queue
 import threading
 import time
@@ -15,7 +16,9 @@ from typing import NamedTuple
 
 import zenoh
 
-from lookahead.bus import poll_fifo
+from lookahead.bus import poll_fifo, recovering_subscriber, reliable_publisher
+
+log = logging.getLogger(__name__)
 
 FIFO_CAPACITY = 8192
 
@@ -73,8 +76,16 @@ def close_session(session) -> None:
 
 
 def subscribe(session, key_expr: str, out: queue.Queue):
-    """Subscribe `key_expr` into `out` (see module docstring); returns the subscriber."""
-    sub = session.declare_subscriber(key_expr, zenoh.handlers.FifoChannel(FIFO_CAPACITY))
+    """Subscribe `key_expr` into `out` (see module docstring); returns the subscriber.
+
+    What a stall of this process made it miss from the service's publishers is recovered
+    from their caches (`lookahead.bus.recovering_subscriber`); what had left the cache is
+    logged at WARNING (the winder then also sees the gap in the batches' seq)."""
+    def lost(n: int) -> None:
+        log.warning("%s: %d messages lost for good (no longer in the publisher's cache)",
+                    key_expr, n)
+
+    sub = recovering_subscriber(session, key_expr, FIFO_CAPACITY, on_miss=lost)
     drain(sub, out, session=session)
     return sub
 
@@ -88,8 +99,9 @@ def watch_liveliness(session, key_expr: str, out: queue.Queue):
 
 
 def publisher(session, key_expr: str):
-    """A reliable publisher that blocks instead of dropping under congestion."""
-    return session.declare_publisher(key_expr, congestion_control=zenoh.CongestionControl.BLOCK)
+    """A reliable publisher that blocks instead of dropping under congestion and keeps a
+    cache for subscribers that missed messages (`lookahead.bus.reliable_publisher`)."""
+    return reliable_publisher(session, key_expr)
 
 
 def wait_for_token(session, key_expr: str, timeout: float) -> bool:

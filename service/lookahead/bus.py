@@ -7,6 +7,7 @@ connects to the service's listen endpoints instead of listening itself.
 
 from __future__ import annotations
 
+import datetime
 import json
 import socket
 import threading
@@ -49,15 +50,65 @@ def open_session(section: ZenohSection):
     return zenoh.open(zenoh_config(section))
 
 
-def reliable_publisher(session, key_expr: str):
+#: messages an advanced publisher keeps for subscribers that missed some (`reliable_publisher`)
+RECOVERY_CACHE = 10_000
+#: the setpoints' cache: a batch of 10 samples of 3 axes is ~350 B, so ~18 MB; 500 s of
+#: motion in real time, 25 s of a paused receiver at 20x real time (`serve --fast`)
+SETPOINT_CACHE = 50_000
+#: the publisher's heartbeat period (s): zenoh retransmits only from publishers with miss
+#: detection on, and a periodic heartbeat (unlike the "sporadic" one, sent only on change)
+#: keeps announcing a stream's last sequence number after the stream ends
+HEARTBEAT_S = 0.25
+#: how often a `recovering_subscriber` asks the publishers it knows for what it has not
+#: received (s). Periodic queries, not zenoh's heartbeat recovery: a subscriber listening to
+#: heartbeats fetched a publisher's whole cache when it joined (old jobs' batches), and
+#: queries also recover the tail of a stream (a receiver paused 5 s past its end)
+RECOVERY_QUERY_S = 0.5
+
+
+def reliable_publisher(session, key_expr: str, cache: int = RECOVERY_CACHE):
     """A publisher that does not lose messages (PROTOCOL.md "Delivery"): reliable, and
     blocking instead of dropping when the transmission queue is full (zenoh's default
-    congestion control drops under load, even on loopback)."""
-    import zenoh
+    congestion control drops under load, even on loopback).
 
-    return session.declare_publisher(key_expr,
-                                     congestion_control=zenoh.CongestionControl.BLOCK,
-                                     reliability=zenoh.Reliability.RELIABLE)
+    It is zenoh's advanced publisher with a cache of the last `cache` messages and sequence
+    numbers: a receiver stalled longer than the lease (`_LEASE_MS`, e.g. starved of CPU or
+    paused) has its transport closed, and every message put meanwhile was lost silently
+    (seen twice on a loaded machine, README "Stop 32"); a `recovering_subscriber` fetches
+    them from the cache once it is back, in order. A plain subscriber (PROTOCOL.md alone)
+    receives the same messages without the recovery."""
+    import zenoh
+    from zenoh import ext
+
+    return ext.declare_advanced_publisher(
+        session, key_expr,
+        congestion_control=zenoh.CongestionControl.BLOCK,
+        reliability=zenoh.Reliability.RELIABLE,
+        cache=ext.CacheConfig(max_samples=cache),
+        sample_miss_detection=ext.MissDetectionConfig(heartbeat=HEARTBEAT_S))
+
+
+def recovering_subscriber(session, key_expr: str, capacity: int,
+                          on_miss: Callable[[int], None] | None = None):
+    """A FifoChannel subscriber of `capacity` samples that recovers what it missed from a
+    `reliable_publisher` (from its cache, delivered in order; from a plain publisher it
+    receives like a plain subscriber). `on_miss(n)`: n messages were lost for good (they
+    had left the publisher's cache)."""
+    import zenoh
+    from zenoh import ext
+
+    period = datetime.timedelta(seconds=RECOVERY_QUERY_S)
+    sub = ext.declare_advanced_subscriber(session, key_expr,
+                                          zenoh.handlers.FifoChannel(capacity),
+                                          recovery=ext.RecoveryConfig(periodic_queries=period))
+    if on_miss is not None:
+        listener = sub.sample_miss_listener(lambda miss: on_miss(int(miss.nb)))
+        _miss_listeners[id(sub)] = listener  # undeclared when dropped: keep it
+    return sub
+
+
+#: the miss listeners of `recovering_subscriber`, by the id of their subscriber
+_miss_listeners: dict[int, object] = {}
 
 
 def client_section(section: ZenohSection) -> ZenohSection:

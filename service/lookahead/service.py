@@ -31,7 +31,13 @@ from typing import Any
 
 import msgpack
 
-from lookahead.bus import open_session, poll_fifo, reliable_publisher
+from lookahead.bus import (
+    SETPOINT_CACHE,
+    open_session,
+    poll_fifo,
+    recovering_subscriber,
+    reliable_publisher,
+)
 from lookahead.config import Config
 from lookahead.planning.base import Planner
 from lookahead.protocol import (
@@ -167,14 +173,13 @@ class PlannerService:
 
     # --- bus ------------------------------------------------------------------------
     def open(self) -> None:
-        import zenoh
-
         self._session = session = open_session(self.config.zenoh)
-        self._pub_setpoints = reliable_publisher(session, key(self.ns, "setpoints"))
+        self._pub_setpoints = reliable_publisher(session, key(self.ns, "setpoints"),
+                                                 cache=SETPOINT_CACHE)
         self._pub_events = reliable_publisher(session, key(self.ns, "events"))
         self._pub_status = session.declare_publisher(key(self.ns, "status"))
-        self._sub = session.declare_subscriber(key(self.ns, "segments"),
-                                               zenoh.handlers.FifoChannel(FIFO_CAPACITY))
+        self._sub = recovering_subscriber(session, key(self.ns, "segments"), FIFO_CAPACITY,
+                                          on_miss=self._segments_lost)
         self._decls += [self._pub_setpoints, self._pub_events, self._pub_status]
         self._decls.append(session.declare_queryable(key(self.ns, "status"), self._on_status))
         self._decls.append(session.declare_queryable(key(self.ns, "cmd", "*"),
@@ -210,6 +215,12 @@ class PlannerService:
                 log.debug("undeclare failed", exc_info=True)
         self._session.close()
         self._session = None
+
+    def _segments_lost(self, n: int) -> None:
+        """The bus lost `n` segments for good (gone from the publisher's cache): the
+        `missing` event asks for them again (PROTOCOL.md "Delivery")."""
+        log.warning("segments: %d lost on the bus (no longer in the publisher's cache); "
+                    "they will be asked for with `missing`", n)
 
     def _drain(self) -> None:
         """FifoChannel -> queue of payloads (at most INCOMING_MAX / _BYTES), until close()."""
