@@ -45,7 +45,7 @@ from lookahead.planning.heuristic import HeuristicPlanner
 from lookahead.planning.lp import LPPlanner
 from lookahead.planning.lp.envelope import path_limits
 from lookahead.planning.lp.grid import feature_steps, near_reversals, refine_grid
-from lookahead.planning.lp.planner import default_grid_step
+from lookahead.planning.lp.planner import GridPlan, default_grid_step
 from lookahead.planning.lp.profile import (
     durations_and_reversals,
     profile_from_grid,
@@ -804,3 +804,30 @@ def test_a_stalled_first_jerk_pass_is_relinearized():
     assert float(res.profile.s_of_t(res.profile.s_of_t.x[-1])) == pytest.approx(382.859)
     rep = played(path, res.profile, m.limits, m.dt)
     assert rep.violations == 0, rep.first
+
+
+class _SeesawLP(LPPlanner):
+    """An LP stand-in whose solution stalls node 7 when node 3 alone has a floor, node 3
+    when node 7 alone has one (and when neither has), and neither when both have."""
+
+    def _solve(self, plan, weight, q_lo, q_hi, rows, n, record):
+        held = q_lo > 0.0
+        q = np.full(n, 0.5)
+        if held[3] and held[7]:
+            return q
+        q[7 if held[3] else 3] = 0.0
+        return q
+
+
+def test_stall_floors_accumulate():
+    """`_unstall`'s floors stay on the nodes they lifted: a floor that lifts one stall
+    and stalls another node must not let the first fall back. The pocketing program's
+    whole-job LP at the retry's jerk margin did just that (two nodes of a straight line
+    lifted to 0.025 q_hi, then back to 0: "the jerk LP has no solution")."""
+    n = 11
+    plan = GridPlan(np.linspace(0.0, 10.0, n), np.zeros(n), np.inf)
+    q = np.full(n, 0.5)
+    q[3] = 0.0
+    out = _SeesawLP()._unstall(plan, np.ones(n), q, np.zeros(n), np.ones(n), [],
+                               {0: 0.0, n - 1: 0.0})
+    assert out[3] > 0.0 and out[7] > 0.0

@@ -48,6 +48,32 @@ class FeedCap:
         idx = np.clip(idx, 0, len(self.values) - 1)
         return self.values[idx]
 
+    def changes(self) -> np.ndarray:
+        """The breaks (arc lengths) where the cap changes value."""
+        return self.s_breaks[1:-1][np.diff(self.values) != 0]
+
+    def at_nodes(self, nodes: np.ndarray) -> np.ndarray:
+        """The cap a planner's node must keep (nodes: increasing arc lengths): the
+        smallest cap over the grid intervals on either side of it. A node just before a
+        drop of the cap, or just after a rise, bounds a feed that the interval beside it
+        carries into the lower cap; with the breaks themselves as nodes
+        (`lp.grid.with_breaks`) only the node at a break is lowered, to the smaller of
+        its two sides, and every interval lies under one cap."""
+        nodes = np.asarray(nodes, dtype=float)
+        cap = self.at(nodes)
+        if nodes.size < 2:
+            return cap
+        b, v, last = self.s_breaks, self.values, len(self.values) - 1
+        # the caps over each open interval (nodes[i], nodes[i+1]): regions lo .. hi
+        lo = np.clip(np.searchsorted(b, nodes[:-1], side="right") - 1, 0, last)
+        hi = np.clip(np.searchsorted(b, nodes[1:], side="left") - 1, 0, last)
+        span = np.minimum(v[lo], v[np.maximum(hi, lo)])
+        for i in np.nonzero(hi > lo + 1)[0]:  # an interval across several breaks (rare)
+            span[i] = np.min(v[lo[i]:hi[i] + 1])
+        cap[:-1] = np.minimum(cap[:-1], span)
+        cap[1:] = np.minimum(cap[1:], span)
+        return cap
+
 
 @dataclass(frozen=True)
 class FeedProfile:

@@ -15,7 +15,14 @@ a moving end, and lower bounds. Lower bounds are never imposed: the stall floors
 `_unstall` are tried and dropped when infeasible. The grid is refined where the path bends
 sharply (`refine`), so the nodal rows see a near-cusp; a near-reversal too sharp for
 any grid (`lp.grid.near_reversals`) becomes a rest node, like a corner. A repair loop far
-from converging gives up early (HOPELESS_RATIO).
+from converging gives up early (HOPELESS_RATIO); one that keeps making progress at new
+places (a long grid) gets more rounds (REPAIRS_PER_BUDGET).
+
+A feed cap (segment feeds, override) changes value at segment ends: each change is a
+node (`lp.grid.with_breaks`), the nodes beside it are as close in time at the lower cap
+as elsewhere at the top feed (`lp.grid.break_steps`), and every node keeps the smaller
+cap of the two intervals beside it (`FeedCap.at_nodes`), so no interval carries one
+cap's feed into the other's.
 
 A moving start (not on the last plan) is handed over by another plan, often one at the
 full limits (the heuristic's, after a fallback), while the LP's rows are the limits times
@@ -65,6 +72,7 @@ import numpy as np
 from lookahead.geometry.base import Path
 from lookahead.limits import AxisLimits
 from lookahead.planning.base import (
+    FeedCap,
     FeedProfile,
     Planner,
     PlanningError,
@@ -82,6 +90,7 @@ from lookahead.planning.lp.envelope import (
     tangent_limits,
 )
 from lookahead.planning.lp.grid import (
+    break_steps,
     build_grid,
     extend_grid,
     feature_samples,
@@ -91,6 +100,7 @@ from lookahead.planning.lp.grid import (
     near_reversals,
     refine_grid,
     split_near,
+    with_breaks,
 )
 from lookahead.planning.lp.handover import plan_handed_over
 from lookahead.planning.lp.knots import c1_knot_caps, knot_fd_ratio, knot_jumps
@@ -161,6 +171,16 @@ HOPELESS_AFTER = 2
 #: and 11309.4 in 4 and 5, each plan ending in a failure after 8 repairs
 STUCK_REPEATS = 2
 STUCK_REACH = 2
+#: a repair round that made progress (its check's worst excess lies at a new place,
+#: beyond STUCK_REACH nodes of every earlier round's, and is the smallest so far) does
+#: not count against `max_repairs`, up to this many times max_repairs rounds in all: a
+#: long grid has many independent places, and each round's re-solve (the jerk rows
+#: re-linearized at its solution) moves small excesses to others. Measured:
+#: cnc-feed-mill-pocket-mixed's whole-job LP (4341 nodes) converged after 10 rounds,
+#: it gave up after 8 and failed; without the "smallest so far" condition the fiberpath
+#: programs' whole-job LPs (15k nodes, excesses growing 1.15 -> 2.6 J at ever new
+#: places) spent all 32 rounds before the retry that plans them: 4x the compute.
+REPAIRS_PER_BUDGET = 4
 #: samples per nominal grid step on which `LPPlanner.refine` judges the path's bends
 FEATURE_SAMPLES = 4
 #: `_unstall`'s time-gradient reference: q floored at this fraction of its upper bound
@@ -261,6 +281,14 @@ def lift_dips(q: np.ndarray, q_hi: np.ndarray, fixed: np.ndarray) -> np.ndarray:
     dip = (inner * RELINEARIZE_RATIO < lo) & ~fixed[1:-1]
     inner[dip] = np.minimum(lo[dip], q_hi[1:-1][dip])
     return out
+
+
+def is_new_place(s: np.ndarray, trouble: list[float], s_bad: float) -> bool:
+    """Whether the arc length s_bad lies further than STUCK_REACH grid intervals (nodes
+    s) from every earlier place `trouble` (all path units)."""
+    near = np.abs(np.searchsorted(s, np.asarray(trouble, dtype=float))
+                  - np.searchsorted(s, s_bad))
+    return not np.any(near <= STUCK_REACH)
 
 
 def stuck_at(s: np.ndarray, trouble: list[float], s_bad: float) -> bool:
@@ -707,6 +735,7 @@ class LPPlanner:
         repairs = 0
         worst = float("nan")
         trouble: list[float] = []  # where each repair round's worst excess was (s)
+        lowest, free = np.inf, 0  # the smallest worst ratio so far; rounds not counted
         may_split = self._stuck_rule and (seam is not None or head is None)
         while True:
             full = self._profile(request, plan, a_start)
@@ -741,8 +770,12 @@ class LPPlanner:
                 break
             kind, s_bad = worst_place(ratios, full)
             stuck = may_split and stuck_at(s, trouble, s_bad)
-            if stuck or repairs >= self.max_repairs or (repairs >= HOPELESS_AFTER
-                                                        and worst > HOPELESS_RATIO):
+            if repairs > 0 and worst < lowest and is_new_place(s, trouble, s_bad):
+                free += 1  # the last round made progress (REPAIRS_PER_BUDGET)
+            lowest = min(lowest, worst)
+            if (stuck or repairs - free >= self.max_repairs
+                    or repairs >= REPAIRS_PER_BUDGET * self.max_repairs
+                    or (repairs >= HOPELESS_AFTER and worst > HOPELESS_RATIO)):
                 exc = PlacedPlanningError(
                     f"lp: sampled profile still exceeds the {kind} limit by "
                     f"{100 * (worst - 1):.1f} % after {repairs} repairs"
@@ -829,7 +862,11 @@ class LPPlanner:
             s, stop_idx = extend_grid(last.geo.s[reused], float(request.s_end), h,
                                       request.v_end <= REST, corners, old_stops)
             s, stop_idx = self.refine(request.path, s, stop_idx, h, first=seam.n_reuse - 1,
-                                      limits=self._grid_limits(request))
+                                      limits=self._grid_limits(request),
+                                      feed_cap=request.feed_cap)
+            if request.feed_cap is not None:
+                s, stop_idx = with_breaks(s, stop_idx, request.feed_cap.changes(),
+                                          first=seam.n_reuse - 1)
             if self._split is not None:  # `_plan_on_seam`: the fresh nodes only
                 k = seam.n_reuse - 1
                 tail, tail_stops = split_near(s[k:], stop_idx[stop_idx >= k] - k,
@@ -856,7 +893,10 @@ class LPPlanner:
         corners = self.corners(request.path, h)
         s, stop_idx = build_grid(s0, s1, h, request.start.v <= REST, request.v_end <= REST,
                                  corners)
-        s, stop_idx = self.refine(request.path, s, stop_idx, h, limits=self._grid_limits(request))
+        s, stop_idx = self.refine(request.path, s, stop_idx, h, limits=self._grid_limits(request),
+                                  feed_cap=request.feed_cap)
+        if request.feed_cap is not None:
+            s, stop_idx = with_breaks(s, stop_idx, request.feed_cap.changes())
         if self._split is not None:
             s, stop_idx = split_near(s, stop_idx, self._split)
         return s, stop_idx
@@ -866,13 +906,14 @@ class LPPlanner:
         return request.limits if self.limit_curve_grid else None
 
     def refine(self, path: Path, s: np.ndarray, stop_idx: np.ndarray, h: float,
-               first: int = 0, limits: AxisLimits | None = None
-               ) -> tuple[np.ndarray, np.ndarray]:
+               first: int = 0, limits: AxisLimits | None = None,
+               feed_cap: FeedCap | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Finer nodes where the path bends sharply (`lp.grid.refine_grid`), from node
         `first` on, judged on samples FEATURE_SAMPLES per nominal step h apart, and finer
         where a bend hides between two of them (`lp.grid.feature_samples`); with `limits`,
         also where the limit-curve feed is low (`lp.grid.limit_curve_steps`: nodes no
-        further apart in time there than h at the top feed)."""
+        further apart in time there than h at the top feed), and likewise at the changes
+        of `feed_cap` at the lower cap (`lp.grid.break_steps`)."""
         lo, hi = float(s[first]), float(s[-1])
         if not hi > lo:
             return s, stop_idx
@@ -883,6 +924,8 @@ class LPPlanner:
             feed = limit_curve_feed(d[2], d[3], limits.amax, limits.jmax)
             v_top = float(np.linalg.norm(limits.vmax * scale))
             step = np.minimum(step, limit_curve_steps(feed, h, v_top))
+        if limits is not None and feed_cap is not None:
+            s_feat, step = break_steps(feed_cap, s_feat, step, h, v_top)
         return refine_grid(s, stop_idx, s_feat, step, first)
 
     def solve_grid(
@@ -1051,12 +1094,19 @@ class LPPlanner:
             lo[bad] = np.maximum(lo[bad], f * q_hi[bad])
             return lo
 
+        # the floors accumulate: a floor that lifted some nodes may stall others, and
+        # flooring only those let the first ones fall back to 0 (the pocketing
+        # program's whole-job LP at jerk margin 0.75: two nodes of a straight line
+        # lifted to 0.025 q_hi, then back to 0, "the jerk LP has no solution")
+        held = np.zeros(q.size, dtype=bool)
         for k in range(STALL_FLOOR_TRIES):
             bad = stalled(q)
             if not np.any(bad):
                 break
+            bad |= held
             try:
                 q = solve(w, floored(bad, floor))
+                held = bad
             except PlanningError:
                 floor *= 0.25
                 if k == 0 and STALL_FLOOR_TRIES > 2:
@@ -1135,7 +1185,7 @@ class LPPlanner:
         vcap = np.sqrt(velocity_caps(geo, lim.vmax)) * tight.vel
         vcap = np.minimum(vcap, c1_knot_caps(request.path, geo.s, lim, request.dt))
         if request.feed_cap is not None:  # the repairs' tightening applies to it too
-            vcap = np.minimum(vcap, request.feed_cap.at(geo.s) * self._repaired(tight))
+            vcap = np.minimum(vcap, request.feed_cap.at_nodes(geo.s) * self._repaired(tight))
         return vcap**2
 
     def _repaired(self, tight: Tightening) -> np.ndarray:
@@ -1277,7 +1327,7 @@ class LPPlanner:
         true = np.minimum(velocity_caps(geo, lim.vmax),
                           c1_knot_caps(request.path, geo.s, lim, request.dt) ** 2)
         if request.feed_cap is not None:
-            true = np.minimum(true, request.feed_cap.at(geo.s) ** 2)
+            true = np.minimum(true, request.feed_cap.at_nodes(geo.s) ** 2)
         return true
 
     def _pretighten(self, request: PlanRequest, geo: GridGeometry, tight: Tightening,
