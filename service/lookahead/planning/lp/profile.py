@@ -136,8 +136,8 @@ def min_speeds(T, h, v0, a0, v1, a1) -> np.ndarray:
 REVERSAL_ROUNDS = 3
 
 
-def secant_accelerations(h: np.ndarray, q: np.ndarray, a: np.ndarray, reverses: np.ndarray
-                         ) -> np.ndarray:
+def secant_accelerations(h: np.ndarray, q: np.ndarray, a: np.ndarray, reverses: np.ndarray,
+                         changed: np.ndarray | None = None) -> np.ndarray:
     """The node accelerations with the free nodes (not the first or last, not at rest) of
     each reversing interval set to that interval's secant (q_i+1 - q_i) / (2 h), the
     constant path acceleration of q linear in s, which a quartic follows without
@@ -157,6 +157,14 @@ def secant_accelerations(h: np.ndarray, q: np.ndarray, a: np.ndarray, reverses: 
             if 0 < node < a.size - 1 and q[node] > 0.0 and abs(secant[j]) < abs(pick[node]):
                 pick[node] = secant[j]
     chosen = np.isfinite(pick)
+    if changed is not None:
+        # a node set in an earlier round whose other interval now reverses: the two
+        # secants have opposite signs at a dip of q (the round-to-round swap left one
+        # side reversing, OSQP's near-stop on the pocketing program), and a = 0, the
+        # acceleration of a minimum, lies between them; same signs: the smaller
+        flip = chosen & changed & (np.sign(pick) != np.sign(a))
+        pick[flip] = 0.0
+        changed |= chosen
     a[chosen] = pick[chosen]
     return a
 
@@ -170,10 +178,11 @@ def profile_from_grid(
     a = node_accelerations(s, q, a_start, a_end)
     h = np.diff(s)
     T, reverses = durations_and_reversals(h, v, a)
+    changed = np.zeros(a.size, dtype=bool)
     for _ in range(REVERSAL_ROUNDS):
         if not np.any(reverses):
             break
-        a = secant_accelerations(h, q, a, reverses)
+        a = secant_accelerations(h, q, a, reverses, changed)
         T, reverses = durations_and_reversals(h, v, a)
     if reverses[0] and v[0] > 0.0:
         # the start state's acceleration is fixed (no secant for node 0): a braking start
