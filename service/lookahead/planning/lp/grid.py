@@ -7,7 +7,12 @@ geometrically to h.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+
+if TYPE_CHECKING:
+    from lookahead.planning.base import FeedCap
 
 
 def graded_span(length: float, h: float, grade_start: bool, grade_end: bool,
@@ -176,10 +181,10 @@ def limit_curve_steps(feed: np.ndarray, h: float, v_top: float) -> np.ndarray:
     return step
 
 
-def break_steps(feed_cap, s_feat: np.ndarray, step: np.ndarray, h: float, v_top: float
+def break_steps(feed_cap: FeedCap, s_feat: np.ndarray, step: np.ndarray, h: float, v_top: float
                 ) -> tuple[np.ndarray, np.ndarray]:
     """The wanted spacing `step` (at arc lengths s_feat, path units) with a sample at each
-    change of `feed_cap` (a `FeedCap`) inside [s_feat[0], s_feat[-1]], wanting there the
+    change of `feed_cap` inside [s_feat[0], s_feat[-1]], wanting there the
     spacing `limit_curve_steps` gives the lower of the two caps; `refine_grid` grades it
     back to the spacing around.
 

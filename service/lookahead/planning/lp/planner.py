@@ -283,21 +283,24 @@ def lift_dips(q: np.ndarray, q_hi: np.ndarray, fixed: np.ndarray) -> np.ndarray:
     return out
 
 
-def is_new_place(s: np.ndarray, trouble: list[float], s_bad: float) -> bool:
-    """Whether the arc length s_bad lies further than STUCK_REACH grid intervals (nodes
-    s) from every earlier place `trouble` (all path units)."""
+def places_near(s: np.ndarray, trouble: list[float], s_bad: float) -> int:
+    """How many of the earlier places `trouble` lie within STUCK_REACH grid intervals
+    (nodes s) of the arc length s_bad (all path units)."""
     near = np.abs(np.searchsorted(s, np.asarray(trouble, dtype=float))
                   - np.searchsorted(s, s_bad))
-    return not np.any(near <= STUCK_REACH)
+    return int(np.count_nonzero(near <= STUCK_REACH))
+
+
+def is_new_place(s: np.ndarray, trouble: list[float], s_bad: float) -> bool:
+    """Whether s_bad lies further than STUCK_REACH grid intervals from every earlier
+    place `trouble` (`places_near`)."""
+    return places_near(s, trouble, s_bad) == 0
 
 
 def stuck_at(s: np.ndarray, trouble: list[float], s_bad: float) -> bool:
-    """Whether the arc length s_bad lies within STUCK_REACH grid intervals (nodes s) of at
-    least STUCK_REPEATS of the earlier places `trouble` (all path units)."""
-    if len(trouble) < STUCK_REPEATS:
-        return False
-    near = np.abs(np.searchsorted(s, np.asarray(trouble)) - np.searchsorted(s, s_bad))
-    return int(np.count_nonzero(near <= STUCK_REACH)) >= STUCK_REPEATS
+    """Whether s_bad lies within STUCK_REACH grid intervals of at least STUCK_REPEATS of
+    the earlier places `trouble` (`places_near`)."""
+    return len(trouble) >= STUCK_REPEATS and places_near(s, trouble, s_bad) >= STUCK_REPEATS
 
 
 #: `LPPlanner.objective` choices, and the floor (fraction of the peak q*) of q* in their

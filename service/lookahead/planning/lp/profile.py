@@ -148,7 +148,10 @@ def secant_accelerations(h: np.ndarray, q: np.ndarray, a: np.ndarray, reverses: 
     and the interval on the flat side cannot keep ds/dt >= 0 with it: the quintic reverses
     by ~1e-4 mm, which the sampler holds (s non-decreasing, `lookahead.sampling`) and the
     checker sees as a jerk spike (measured: 2.6x jmax on c-rand6-scales, 5x on
-    c-fourier-xc, both passing the analytic check, which follows the reversal)."""
+    c-fourier-xc, both passing the analytic check, which follows the reversal).
+
+    changed: per node, whether an earlier round set it (updated in place); such a node
+    asked now for a secant of the other sign takes a = 0 (`profile_from_grid`'s rounds)."""
     a = a.copy()
     secant = np.diff(q) / (2.0 * h)
     pick = np.full(a.size, np.inf)
