@@ -282,7 +282,12 @@ def test_replans_only_when_looking_ahead_less_than_the_keep_distance(monkeypatch
     assert len(committed) == engine.replans
     assert all(problem is None for _, problem in rec.calls)
     duration, old_duration = len(pos), sum(b.n for b in old_batches)
-    assert duration <= 1.005 * old_duration
+    # within 4 %, either way: since the heuristic continues its last plan
+    # (`heuristic.continuation`), a replan every 0.1 s also mixes layouts along a window
+    # (8270 samples here against 8546; before, 8827 against 8622); on the 64 non-long
+    # corpus paths a replan every 0.1 s was -4.4 .. +3.9 % (median 0) for 15x the compute
+    # (bench/results/corpus_heuristic_replan_every.json)
+    assert duration <= 1.04 * old_duration
     if stream:
         assert engine.replans >= len(segs) // 2  # extended as the geometry arrives
     else:

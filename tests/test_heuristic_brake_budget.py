@@ -58,14 +58,17 @@ def _planned(result, request: PlanRequest) -> None:
 def test_later_brake_target_plans_before_full_rounds_on_earlier_ones(monkeypatch):
     """Above the feed limit at 107 mm/s: the rests after the 1.0 and 0.7 targets fail
     their first-pass rounds; the 0.5 target's rest verifies, so no layout gets the full
-    rounds (before: 4 layouts x 12 rounds, 14 of the 17 s)."""
+    rounds (before: 4 layouts x 12 rounds, 14 of the 17 s). (The plan that goes on from
+    the start without a brake is faster and wins, `_faster_going_on`; the brake it beat
+    is in the info.)"""
     request = _request(PathState(76.6223405, 106.837168, -238.117866))
     planner = make_planner("heuristic")
     rounds, _ = _counted(monkeypatch)
     result = planner.plan(request)
     _planned(result, request)
-    assert "brake_target" in result.info
-    assert result.info["brake_target"] < 1.0  # the first target's rest did fail
+    target = result.info.get("brake_target", result.info.get("beaten_brake_target"))
+    assert target is not None
+    assert target < 1.0  # the first target's rest did fail
     assert planner.repair_rounds not in rounds, rounds
 
 

@@ -271,9 +271,11 @@ class Engine:
         #: worker never shares one with the stops that the engine plans meanwhile
         self._ahead_fallback = stop_planner
         if stop_planner is None:
-            stop_planner = HeuristicPlanner(margin=1.0)
-            search_planner = HeuristicPlanner(margin=1.0, brake_within_limits=False)
-            self._ahead_fallback = HeuristicPlanner(margin=1.0) if realtime else stop_planner
+            stop_planner = HeuristicPlanner(margin=1.0, continue_last=False)
+            search_planner = HeuristicPlanner(margin=1.0, brake_within_limits=False,
+                                              continue_last=False)
+            self._ahead_fallback = (HeuristicPlanner(margin=1.0, continue_last=False)
+                                    if realtime else stop_planner)
         assert self._ahead_fallback is not None
         #: runs the replans computed ahead (real-time mode); the service passes a worker
         #: thread, anything else computes them at once, with the same results

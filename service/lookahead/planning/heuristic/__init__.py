@@ -13,6 +13,7 @@ Modules, each importing only the ones above it:
 - `scan`: forward/backward jerk-limited scans, free junction states, the segment chain.
 - `zero_junctions`: the paper's junctions with path acceleration 0 (the fallback).
 - `brake`: braking a start state that is above the limits.
+- `continuation`: a replan kept on the last plan up to its next cruise state.
 - `planner`: `HeuristicPlanner` (rounds of chain, verification and repair).
 """
 

@@ -35,7 +35,13 @@ class BudgetShares:
     centripetal: share of amax that |x_ss| v^2 may take (the rest is for path acceleration).
     jerk_geometric: share of jmax that |x_sss| v^3 may take.
     jerk_coupling: share of jmax that 3 |x_ss| v a may take.
-    c1_knot: share of jmax * dt that the acceleration jump |dx_ss| v^2 at a C1 knot may take.
+    c1_knot: share of jmax * dt that the acceleration jump |dx_ss| v^2 at a C1 knot may take
+    (the cells beside the knot keep 1 - 3/4 of it for the rest). Trades the feed through
+    the knot against the jerk around it; swept by bench/c1_knot_share.py on the corpus's
+    two C1 paths and ten generated ones (bench/results/c1_knot_share.json): 0.75 is at
+    worst 1.105x the best share per path (geometric mean 1.025x), 0.25 up to 1.46x
+    (c-rand3-xyz-pchip 17.31 -> 12.75 s, the pchip helix 8.56 -> 7.76 s), 0 violations
+    at every share.
     velocity: share of vmax that |x_s| v may take at the budget points (below 1: |x_s| peaks
     between them; at 1.0 the sampled X velocity of Fourier paths exceeded vmax by 1e-8 to
     4e-8 relative, with fine and coarse bands; 1e-4 below costs 0.01 % on X-bound strokes).
@@ -47,7 +53,7 @@ class BudgetShares:
     centripetal: float = 0.6
     jerk_geometric: float = 0.3
     jerk_coupling: float = 0.3
-    c1_knot: float = 0.25
+    c1_knot: float = 0.75
     velocity: float = 0.9999
     headroom: float = 0.9999
 

@@ -20,8 +20,11 @@ repaired, on several layouts of planning segments (the fastest verified plan win
    that still fails raises PlanningError (never an unverified profile).
 5. A start above the limits (override down, lower feed cap): first a brake (`brake`), then
    steps 1-4 from where it ends. A start above the feed limit but within the axis limits
-   that no brake plans (inside a valley motion of the last plan): steps 1-4 from it, the
-   valley continued from the start (`valley.start_valley`).
+   (inside a valley motion of the last plan, or of a wider layout's): steps 1-4 from it,
+   the valley continued from the start (`valley.start_valley`), where no brake plans or
+   where that is faster than the brake.
+6. A replan that starts on the last plan and loses time against it: the last plan kept
+   up to its next cruise state, steps 1-5 from there (`continuation`).
 """
 
 from __future__ import annotations
@@ -40,6 +43,14 @@ from lookahead.planning.heuristic.brake import (
     first_cells,
     phases_end,
     state_scale,
+)
+from lookahead.planning.heuristic.continuation import (
+    LastPlan,
+    prefix_within_limits,
+    seam_state,
+    seam_time,
+    start_time,
+    time_at_s,
 )
 from lookahead.planning.heuristic.levels import LEVEL_FRACTIONS, FeedLevels, level_budgets
 from lookahead.planning.heuristic.path_limits import (
@@ -72,6 +83,7 @@ from lookahead.planning.heuristic.zero_junctions import (
     junction_feeds,
     zero_junction_parts,
 )
+from lookahead.planning.profile_ops import concatenate, slice_profile
 
 #: repair step: factor on V, A, J of a segment that fails verification (0.85: 1-3 rounds on
 #: the tubes, Fourier and random wandering paths of tests/heuristic_paths.py)
@@ -199,6 +211,20 @@ ZERO_JUNCTIONS = Layout(1.25, BudgetShares(), free_junctions=False)
 LAYOUTS = (COARSE, COARSE_WIDE, FINE)
 
 
+#: a replan that starts on the last plan is joined onto it (`HeuristicPlanner._continued`)
+#: only where the fresh plan reaches the last plan's next cruise state this much later
+#: than the last plan does (relative; the joined plan costs a second plan) and the joined
+#: plan takes this much less time over the window than the fresh one. Trades time
+#: against smoothness: the last plan's feed up to the seam may lie above the caps of the
+#: layout the rest is planned on, which then brakes at once (at 1e-3, a joined plan of
+#: the 3-stroke X/C job of tests/test_stream_ahead.py cruised at 1262 mm/s into a dip to
+#: 1219 mm/s and back to 1241, where the fresh plan cruised at 1241, for a window less
+#: than 0.5 % shorter). Joined plans that won on corpus paths gained 0.05 %
+#: (w-cone-R80to40) to 5.8 % (c-rand4) of their window; at 0.5 % the sub-percent ones
+#: stay fresh
+CONTINUE_GAIN = 0.005
+
+
 class HeuristicPlanner:
     """Heuristic planner: free-junction S-curve chain, verification + repair.
 
@@ -220,6 +246,10 @@ class HeuristicPlanner:
     (`BudgetShares.velocity`) the checker found nothing the grid check had passed on
     tests/heuristic_paths.py and the corpus's fast set, and on a pchip tube its four
     phases cost 8 % winding time for differences the single-phase checker accepted.
+    continue_last: a replan that starts on the last plan may keep it up to its next cruise
+    state (`continuation`): the engine's planner of a job's windows. False for planners
+    whose requests do not continue one another (stops, shortest-stop searches, the LP's
+    transients, fallbacks).
     brake_within_limits: when the plan from a moving start fails, try the brake fallback
     (brake, then plan the rest) also if the start state is within the limits. False for a
     shortest-stop search (`stream.plans.shortest_stop`): its too-short trials then fail in
@@ -233,8 +263,10 @@ class HeuristicPlanner:
                  shares: BudgetShares | None = None, repair_rounds: int = 12,
                  brake_within_limits: bool = True, free_junctions: bool = True,
                  layouts: tuple[Layout, ...] | None = None,
-                 sampled_verify: bool = False, valleys: bool = True) -> None:
+                 sampled_verify: bool = False, valleys: bool = True,
+                 continue_last: bool = True) -> None:
         self.brake_within_limits = brake_within_limits
+        self.continue_last = continue_last
         self.valleys = valleys
         self.sampled_verify = sampled_verify
         self.margin = margin
@@ -249,10 +281,77 @@ class HeuristicPlanner:
         self._solver = SCurveSolver()
         self._last_layout = 0
         self._fixed: np.ndarray | None = None  # the last chain's valley segments
+        self._last: LastPlan | None = None  # the last plan returned (`continuation`)
         self._brake = Brake(self.shares, margin, self._solver)
 
     # --- public ---------------------------------------------------------------------
     def plan(self, request: PlanRequest) -> PlanResult:
+        """The fastest verified profile for the request: planned afresh, or (a replan
+        that starts on the last plan and loses time against it) the last plan kept up
+        to its next cruise state and planned afresh from there (`continuation`)."""
+        t_start = time.perf_counter()
+        try:
+            fresh = self._plan_fresh(request)
+        except PlanningError:
+            # a replan on the last plan that no fresh plan verifies may still go on
+            # from the last plan's next cruise state
+            result = self._continued(request, None)
+            if result is None:
+                self._last = None
+                raise
+        else:
+            result = self._continued(request, fresh) or fresh
+        self._last = LastPlan(request, result.profile)
+        return replace(result, compute_s=time.perf_counter() - t_start)
+
+    def forget(self) -> None:
+        """Drop the last plan (the next request is planned without continuing it)."""
+        self._last = None
+
+    def _continued(self, request: PlanRequest, fresh: PlanResult | None
+                   ) -> PlanResult | None:
+        """The last plan up to its seam (`continuation.seam_time`) then a fresh plan from
+        there, where the fresh plan reaches the seam more than CONTINUE_GAIN later than
+        the last plan does and the joined plan ends CONTINUE_GAIN sooner (`fresh` None: no
+        fresh plan verified; then wherever the joined one does); else None."""
+        last = self._last
+        if not self.continue_last:
+            return None
+        t0 = start_time(last, request)
+        if t0 is None:
+            return None
+        t1 = seam_time(last.profile, t0, request.dt)
+        if t1 is None:
+            return None
+        seam = seam_state(last.profile, t1)
+        if not seam.s < request.s_end or (fresh is not None and not time_at_s(
+                fresh.profile, seam.s) > (t1 - t0) * (1.0 + CONTINUE_GAIN)):
+            return None
+        prefix = slice_profile(last.profile, t0, t1)
+        if not prefix_within_limits(request, prefix, self.shares, self.max_cell):
+            return None
+        # from the seam, a cruise state, only the layouts' first pass: a seam that needs
+        # brakes, rescues or full repair rounds is no better than the fresh plan (on the
+        # pocketing program a failing second pass from a seam took 2.3 s)
+        rest_request = replace(request, start=seam)
+        limits = request.limits.scaled(self.margin)
+        grid, vlim = self._grid(rest_request, seam, limits)
+        if seam.v > vlim[0]:
+            return None
+        try:
+            phases, info = self._plan_phases(rest_request, grid, vlim, limits,
+                                             second_pass=False)
+        except PlanningError:
+            return None
+        rest = build_profile(phases)
+        if fresh is not None and not (prefix.duration + rest.duration
+                                      < (1.0 - CONTINUE_GAIN) * fresh.profile.duration):
+            return None
+        return PlanResult(concatenate([prefix, rest]), self.name, 0.0,
+                          {**info, "continued_s": seam.s - request.start.s})
+
+    def _plan_fresh(self, request: PlanRequest) -> PlanResult:
+        """A plan for the request that does not look at the last plan."""
         t_start = time.perf_counter()
         start = request.start
         s_end = float(request.s_end)
@@ -345,7 +444,9 @@ class HeuristicPlanner:
                 problem, refused = str(exc), False
                 continue
             info = {"brake_scale": g, "brake_target": fraction, **core}
-            return self._result(build_profile(concat_phases([brake, phases])), t_start, info)
+            return self._result(build_profile(self._faster_going_on(
+                request, grid, vlim, limits, concat_phases([brake, phases]), info, tried)),
+                t_start, info)
         for fraction, g, brake, rest, rest_grid, rest_vlim, exhausted in retry:
             try:
                 phases, core = self._second_pass(rest, rest_grid, rest_vlim, limits,
@@ -354,7 +455,9 @@ class HeuristicPlanner:
                 problem, refused = str(exc), False
                 continue
             info = {"brake_scale": g, "brake_target": fraction, **core}
-            return self._result(build_profile(concat_phases([brake, phases])), t_start, info)
+            return self._result(build_profile(self._faster_going_on(
+                request, grid, vlim, limits, concat_phases([brake, phases]), info, tried)),
+                t_start, info)
         if request.start.v > vlim[0] / self.margin and \
                 self._may_go_on(request, grid, vlim, limits):
             # a wider layout's plan, or a valley motion from the start, may go on from it
@@ -425,6 +528,39 @@ class HeuristicPlanner:
             self._last_layout = i
             return phases, {**info, "layout": i}
         raise PlanningError(problem)
+
+    def _faster_going_on(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
+                         limits: AxisLimits, braked: Phases, info: dict,
+                         tried: set[tuple[float, float, float]]) -> Phases:
+        """`braked` (a brake from a start above the feed limit, then the rest), or the
+        plan that goes on from the start without a brake where `_may_go_on` allows one,
+        verifies and takes less time over the same window (`info` updated in place: then
+        the plan's own, with `went_on` and the beaten brake's `beaten_brake_target`).
+
+        A start above the default shares' limit is mostly a state of the last plan
+        made under wider shares or inside a valley motion: its brake to a fraction of
+        the limit then crawls (cam-style-R100-a30-L600's replans from 1167 mm/s braking
+        at 1000 mm/s^2, 4 s at 144 mm/s after the brake: 6.10 s where the whole-job plan
+        takes 2.60 s over the same stretch); a plain plan from such a state can still
+        lose to the brake elsewhere (on a wavy path the engine's replans took 3 % longer
+        planned directly), so the two are compared, not ordered. `tried`: the brakes'
+        end states whose rests were planned (a brake target at or above the start feed
+        ends at the start itself, whose plan then failed already; a start below the feed
+        limit was planned directly first, and failed)."""
+        st = request.start
+        if (st.s, st.v, st.a) in tried or not st.v > vlim[0] / self.margin or \
+                not self._may_go_on(request, grid, vlim, limits):
+            return braked
+        try:
+            phases, core = self._plan_phases(request, grid, vlim, limits, second_pass=False)
+        except PlanningError:
+            return braked
+        if not float(np.sum(phases.duration)) < float(np.sum(braked.duration)):
+            return braked
+        beaten = info.get("brake_target")
+        info.clear()
+        info.update({**core, "went_on": True, "beaten_brake_target": beaten})
+        return phases
 
     def _may_go_on(self, request: PlanRequest, grid: PathGrid, vlim: np.ndarray,
                    limits: AxisLimits) -> bool:

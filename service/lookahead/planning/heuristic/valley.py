@@ -238,7 +238,7 @@ def start_valley(grid: PathGrid, starts: np.ndarray, b: SegmentBudgets, levels: 
     `find_valleys`' motions; the largest j of START_JERKS that fits (the fastest)."""
     v0, a0 = float(start[0]), float(start[1])
     n = b.L.size
-    if not (v0 > float(b.V[0]) and n > 1):
+    if not (n > 1 and v0 > float(np.min(b.V[:_braking_reach(b, v0, a0)]))):
         return None
     reach = int(starts[min(MAX_SPAN, n - 1)])
     kappa = float(np.max(np.linalg.norm(grid.xss[:reach], axis=-1)))
@@ -258,6 +258,22 @@ def start_valley(grid: PathGrid, starts: np.ndarray, b: SegmentBudgets, levels: 
                           hard):
             return Valley(0, k1, ph, (v0, a0), exit_)
     return None
+
+
+def _braking_reach(b: SegmentBudgets, v0: float, a0: float) -> int:
+    """How many planning segments from the first one begin before the start (v0, a0)
+    could come to rest under the first segment's budgets (A, J): the segments whose
+    caps a start below its own first cap may still be above: a replan a hair before a
+    tight bend that the last plan passed in a valley motion continues that motion
+    (c-rand4-xyza's replan at s = 208.19 from 76.6 mm/s braking at 700 mm/s^2 under a
+    first cap of 86.8 mm/s, with caps of 70.5 and 56.1 mm/s within 3.5 mm; with only the
+    first segment's cap considered the engine wound the path in 7.93 s, 7.61 s now)."""
+    A, J = float(b.A[0]), float(b.J[0])
+    if not (A > 0.0 and J > 0.0):
+        return 1
+    # rest from (v0, a0): turn a0 to -A, brake at A, turn back (an overestimate)
+    t = max(a0, 0.0) / J + v0 / A + A / J
+    return max(1, int(np.searchsorted(b.s0, float(b.s0[0]) + v0 * t, side="right")))
 
 
 def _start_span(b: SegmentBudgets, levels: FeedLevels, J: np.ndarray, cap: np.ndarray,

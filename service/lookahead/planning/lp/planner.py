@@ -479,7 +479,7 @@ class LPPlanner:
         if self.transient is None:
             from lookahead.planning.heuristic import HeuristicPlanner
 
-            self.transient = HeuristicPlanner(margin=1.0)
+            self.transient = HeuristicPlanner(margin=1.0, continue_last=False)
         return self.transient
 
     def _plan_released(self, request: PlanRequest, fixed_head: np.ndarray | None
