@@ -7,6 +7,7 @@ the axis acceleration allowed ~1400; winding 1.196 -> 1.155 s on n-circle-R30)."
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from lookahead.geometry import fit_points
 from lookahead.limits import AxisLimits
@@ -62,3 +63,43 @@ def test_lower_levels_use_more_than_the_coupling_share():
             share_cap = shares.jerk_coupling * float(np.min(XY.jmax)) / (3.0 * xss * top)
             gained.append(acc / share_cap)
     assert min(gained) > 1.2, min(gained)
+
+
+def test_a_level_rise_lands_on_the_backward_scan_faster_than_one_budget():
+    """Cause (cam-fp-vonkarman, 22 % slower than the windowed LP): out of each turnaround
+    the rise to the stroke's cap would overshoot the backward scan at the segment's end,
+    so the chain took Ruckig's single-budget motion, holding 846 mm/s^2 (the budget at
+    the cap) where the feed levels allow 2500 below 360 mm/s. `_land_level_rise` follows
+    the level rise as long as Ruckig can still land it on the scan's state: the motion
+    ends exactly in that state at the segment's end, keeps every feed level's budget
+    until the hand-over and the single budget (or less) after it, and is faster."""
+    from lookahead.planning.heuristic.path_limits import SegmentBudgets
+    from lookahead.planning.heuristic.profile_build import build_profile
+    from lookahead.planning.heuristic.rise import rise_levels
+    from lookahead.planning.heuristic.scan import _land_level_rise
+    from lookahead.planning.heuristic.scurve import SCurveSolver, end_state
+
+    s0, L, V, A, J = 1232.3, 287.7, 557.0, 846.0, 21426.0
+    tops, accs = [223.0, 362.0, 473.0, 557.0], [2559.0, 2504.0, 1845.0, 846.0]
+    b = SegmentBudgets(np.array([s0]), np.array([L]), np.array([V]), np.array([A]),
+                       np.array([J]))
+    level = rise_levels(s0, L, 118.8, 0.0, tops, accs, J)
+    assert level is not None and level[1] == pytest.approx(V)  # it reaches the cap
+    target = np.array([420.0, -600.0])  # the scan, braking for what follows
+    solver = SCurveSolver()
+    single = solver.segment(s0, L, 118.8, 0.0, 420.0, V, A, J, a1=-600.0)
+    landed = _land_level_rise(solver, b, 0, level[0], target, A, J)
+    assert landed is not None
+    s, v, a = end_state(landed)
+    assert s == pytest.approx(s0 + L, rel=1e-9)
+    assert v == pytest.approx(420.0, rel=1e-6) and a == pytest.approx(-600.0, abs=1e-3)
+    assert np.sum(landed.duration) < 0.97 * np.sum(single.duration)
+    prof = build_profile(landed)
+    t = np.linspace(0.0, prof.duration, 4000)
+    _, vv, aa, jj = prof.at(t)
+    assert np.all(vv > 0.0) and np.all(np.abs(jj) <= J * (1 + 1e-9))
+    ceiling = np.select([vv <= top for top in tops], accs, default=0.0)
+    # the hand-over is the first sample whose acceleration exceeds the level ceiling
+    # nowhere before: after it, the landing holds at most the acceleration it started at
+    over = aa > ceiling * (1 + 1e-9)
+    assert not over.any() or np.all(aa[np.argmax(over):] <= np.max(aa[:np.argmax(over) + 1]))

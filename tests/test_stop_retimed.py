@@ -61,12 +61,33 @@ def test_the_first_stop_ramp_is_the_s_curve_at_the_tangents_limits(v, tangent) -
         assert max(c2 * edge / r1, c2 / r2) == pytest.approx(1.0)
 
 
+#: how far ahead (s) the plan in force must cruise smoothly for a hold to stop it by
+#: re-timing: the re-timed stop's ramp runs over its next motion, and a feed step there (a
+#: heuristic segment's cap 0.8 % lower, crossed at full jerk) lengthens it beyond the
+#: braking guess
+CLEAN_CRUISE_S = 0.4
+
+
 def _hold_at_full_feed(engine: Engine) -> tuple[list, PathState]:
     """Run `job_segments` to the sample of the plan in force's highest feed (after 2.1 s,
     on a replan: the first plan's window ends at rest, so its feed still rises where a
-    replan takes over), then send a hold: the batches so far."""
-    batches, k_cmd, _ = run_to_profile_peak(engine, 1, skip=210)
-    state = engine._active.plan.state(k_cmd - 1, engine.dt)
+    replan takes over), on to the first batch boundary from which that plan cruises
+    smoothly for CLEAN_CRUISE_S, then send a hold: the batches so far."""
+    batches, _, _ = run_to_profile_peak(engine, 1, skip=210)
+    dt = engine.dt
+    ahead = np.arange(int(CLEAN_CRUISE_S / dt))
+    for _ in range(int(2.0 / (engine.batch * dt))):
+        plan = engine._active.plan
+        k = batches[-1].k0 + batches[-1].n
+        _, _, acc, jerk = plan.profile.at(plan.times(k - 1 + ahead, dt))
+        # a smooth cruise (the LP's feed swings slowly, +-130 mm/s^2 here); no feed step
+        # crossed at the jerk limit (20,000 mm/s^3 and more)
+        if np.max(np.abs(acc)) < 200.0 and np.max(np.abs(jerk)) < 2000.0:
+            break
+        batches.append(engine.next_batch())
+    else:
+        pytest.fail("the plan in force never cruises for CLEAN_CRUISE_S within 2 s")
+    state = engine._active.plan.state(batches[-1].k0 + batches[-1].n - 1, dt)
     assert state.v > 100.0  # mm/s (X, C)
     assert engine.command(Command("hold")).ok
     return batches, state

@@ -336,8 +336,8 @@ class HeuristicPlanner:
         rest_request = replace(request, start=seam)
         limits = request.limits.scaled(self.margin)
         grid, vlim = self._grid(rest_request, seam, limits)
-        if seam.v > vlim[0]:
-            return None
+        if seam.v > self._start_limit(rest_request, grid, vlim, limits):
+            return None  # (a cruise of the last plan above every layout's feed limit)
         try:
             phases, info = self._plan_phases(rest_request, grid, vlim, limits,
                                              second_pass=False)

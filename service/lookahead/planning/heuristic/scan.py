@@ -21,9 +21,10 @@ junction k is the start of segment k (junction nseg is the window's end) and has
    towards V) is taken while it stays below the backward scan and can still reach the
    backward state one junction further (a Ruckig segment, kept for the next step);
    otherwise the kept Ruckig segment blends onto the backward scan (the switching point
-   lies in that segment) and the chain follows the scan's own motions until a rise fits
-   again. If neither fits, the blend is moved a junction back (backtracking), at the start
-   over several segments at once.
+   lies in that segment), or, with feed levels where faster, the segment's level rise up
+   to where Ruckig can still land it on the scan (`_land_level_rise`), and the chain
+   follows the scan's own motions until a rise fits again. If neither fits, the blend
+   is moved a junction back (backtracking), at the start over several segments at once.
 3. Valleys (`valley`, with feed levels): at a tight bend the backward scan takes a
    valley's motion over its span of segments where a motion from its exit reaches the
    scan's state after it, and goes on from its entry; nothing else writes into a span
@@ -484,6 +485,53 @@ def _far_below(rise: tuple[Phases, float, float], b1: np.ndarray, b2: np.ndarray
     return v + a * abs(a) / (2.0 * J) <= FAR_BELOW * min(float(b1[0]), float(b2[0]))
 
 
+#: bisection steps for where a level rise hands over to the Ruckig motion that lands it
+#: on the backward scan (`_land_level_rise`): the hand-over within 2^-LAND_STEPS of the
+#: rise's length
+LAND_STEPS = 10
+#: the landing is tried only where the segment's lowest feed level allows this much more
+#: acceleration than its single budget (else Ruckig's motion is as fast: a compute bound)
+LAND_GAIN = 1.1
+
+
+def _land_level_rise(solver: SCurveSolver, b: SegmentBudgets, k: int, level: Phases,
+                     target: np.ndarray, A: float, J: float) -> Phases | None:
+    """Segment k's rise under its feed levels (`level`, from its start state), followed
+    up to the latest point from which a Ruckig motion over the rest of the segment (cap
+    V, budgets A and J, at least the acceleration it starts with) lands on the backward
+    scan's state `target` at junction k + 1: bisection on that point. None if no point
+    past the start does. Where the rise would overshoot the scan, the single-budget
+    Ruckig motion from the start held the segment's acceleration at its budget at the
+    cruise cap (846 mm/s^2 on cam-fp-vonkarman's rises out of its turnarounds, where the
+    levels allow 2500 below 360 mm/s and the windowed LP accelerates at 2450)."""
+    s0, L = float(b.s0[k]), float(b.L[k])
+    end = s0 + L
+    V = float(b.V[k]) * (1.0 + V_ROOM)
+    v1, a1 = float(target[0]), float(target[1])
+
+    def land(s_cut: float) -> Phases | None:
+        got = split_at(level, s_cut)
+        if got is None or not got[2] > 0.0:
+            return None
+        head, _, v, a = got
+        try:
+            tail = solver.segment(s_cut, end - s_cut, v, a, v1, V, max(A, abs(a), abs(a1)),
+                                  J, a1=a1)
+        except SegmentInfeasibleError:
+            return None
+        return concat_phases([head, tail])
+
+    lo, hi, best = s0, end, None
+    for _ in range(LAND_STEPS):
+        mid = 0.5 * (lo + hi)
+        got = land(mid)
+        if got is None:
+            hi = mid
+        else:
+            lo, best = mid, got
+    return best
+
+
 def _failed(broken: list | None, k: int) -> None:
     """A chain that found no motion: the segment where it gave up, into `broken`."""
     if broken is not None:
@@ -572,9 +620,11 @@ def chain(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: np.ndarra
             # a deceleration beyond the segment's budget is the backward scan's, under its
             # feed levels: nothing rises faster from there (the scan is the fastest state),
             # and a rise would first need Ruckig to brake it (70 % of the rises on a dome)
+            level = None  # the segment's rise under its feed levels, kept or not
             if k + 1 < n and not (levels is not None and x[1] < -float(A_seg[k])):
                 rise = _rise_below(solver, b, k, x, float(A_seg[k]), float(J_scan[k]),
                                    float(cap[k + 1]), levels)
+                level = rise if levels is not None else None
                 if rise is not None and rise[1] > bwd[k + 1, 0] * (1 + _REL):
                     rise = None
             if rise is not None and _far_below(rise, bwd[k + 1], bwd[k + 2], Js[k]):
@@ -593,8 +643,19 @@ def chain(solver: SCurveSolver, b: SegmentBudgets, cap: np.ndarray, w: np.ndarra
                     continue
             if blend is None or blend is bmot[k]:
                 # the scan's own motion is feasible but not time-optimal (it holds the feed
-                # and accelerates as late as possible): Ruckig's motion is used where it exists
+                # and accelerates as late as possible): Ruckig's motion is used where it
+                # exists
                 blend = solve(k, x, bwd[k + 1]) or blend
+            if blend is not None and blend is not bmot[k] and level is not None and \
+                    levels.accs[k][0] > LAND_GAIN * As[k]:
+                # (a single-budget Ruckig motion) or the level rise landed on the scan by
+                # Ruckig, where faster
+                landed = _land_level_rise(solver, b, k, level[0], bwd[k + 1],
+                                          float(As[k]), float(Js[k]))
+                if landed is not None and float(np.sum(landed.duration)) < float(
+                        np.sum(blend.duration)):
+                    blend = landed
+                    stats["landed_levels"] = stats.get("landed_levels", 0) + 1
             if blend is not None:  # onto the backward scan
                 parts.append(blend)
                 states.append((float(bwd[k + 1, 0]), float(bwd[k + 1, 1])))
