@@ -5,10 +5,10 @@ Why: a replan from a state of the last plan plans on a new grid of cells and seg
 from a start the last plan reached by motions (valleys above the caps, rises onto a
 short dip) that the new layout may not offer from that state; it then brakes, merges
 its first segments or repairs for rounds, and crawls where the last plan did not
-(cam-fp-hel25's replan 1.4 mm before a tight bend: 300 mm at 119 mm/s, 13.4 s where the
-last plan took 2.8 s; w-cone-R80to40's replan accelerating at 1197 mm/s^2 into a 6 mm
-dip: 4.40 s against 3.87). The LP keeps its last plan's nodes at a seam for the same
-reason (`lp.seam`).
+(cam-fp-hel25's replan 1.4 mm before a tight bend: 300 mm at 119 mm/s, 13.4 s over a
+stretch the whole-job plan takes in 2.8 s; w-cone-R80to40's replan accelerating at
+1197 mm/s^2 into a 6 mm dip: 4.40 s against 3.87). The LP keeps its last plan's nodes
+at a seam for the same reason (`lp.seam`).
 
 Frames and units: s arc length (path units), t seconds from a profile's start.
 """
@@ -65,7 +65,8 @@ def time_at_s(profile: FeedProfile, s: float) -> float:
 
 def start_time(last: LastPlan | None, request: PlanRequest) -> float | None:
     """The time on the last plan's profile at which the request's start is its state
-    (same limits, dt and feed cap; feed and acceleration to MATCH_TOL), or None."""
+    (same limits and dt; feed and acceleration to MATCH_TOL), or None. (A changed feed
+    cap or path is for `prefix_within_limits` to judge.)"""
     if last is None or not same_limits(last.request, request):
         return None
     start = request.start
