@@ -32,6 +32,12 @@ class AxisLimits:
     def naxes(self) -> int:
         return int(self.vmax.shape[0])
 
+    def same_as(self, other: AxisLimits) -> bool:
+        """True if both limits are equal exactly, per axis."""
+        return self is other or (np.array_equal(self.vmax, other.vmax)
+                                 and np.array_equal(self.amax, other.amax)
+                                 and np.array_equal(self.jmax, other.jmax))
+
     def scaled(self, factor: float) -> AxisLimits:
         """The same limits times `factor` (e.g. 0.98 for a planning margin)."""
         return AxisLimits(self.vmax * factor, self.amax * factor, self.jmax * factor)

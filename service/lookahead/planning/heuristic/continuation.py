@@ -38,14 +38,6 @@ class LastPlan:
     profile: FeedProfile
 
 
-def same_limits(a: PlanRequest, b: PlanRequest) -> bool:
-    """True if both requests plan under the same limits and sample time."""
-    la, lb = a.limits, b.limits
-    return (a.dt == b.dt
-            and np.array_equal(la.vmax, lb.vmax) and np.array_equal(la.amax, lb.amax)
-            and np.array_equal(la.jmax, lb.jmax))
-
-
 def time_at_s(profile: FeedProfile, s: float) -> float:
     """The first time (s from the profile's start) at which the profile reaches arc
     length s (its end if it does not): bisection on the monotone s(t) (hand-written: one
@@ -67,7 +59,8 @@ def start_time(last: LastPlan | None, request: PlanRequest) -> float | None:
     """The time on the last plan's profile at which the request's start is its state
     (same limits and dt; feed and acceleration to MATCH_TOL), or None. (A changed feed
     cap or path is for `prefix_within_limits` to judge.)"""
-    if last is None or not same_limits(last.request, request):
+    if last is None or request.dt != last.request.dt or \
+            not request.limits.same_as(last.request.limits):
         return None
     start = request.start
     prof = last.profile

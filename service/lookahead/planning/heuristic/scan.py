@@ -49,6 +49,7 @@ from lookahead.planning.heuristic.scurve import (
     Phases,
     SCurveSolver,
     SegmentInfeasibleError,
+    latest_feasible,
     split_at,
 )
 from lookahead.planning.heuristic.valley import Valley
@@ -521,15 +522,7 @@ def _land_level_rise(solver: SCurveSolver, b: SegmentBudgets, k: int, level: Pha
             return None
         return concat_phases([head, tail])
 
-    lo, hi, best = s0, end, None
-    for _ in range(LAND_STEPS):
-        mid = 0.5 * (lo + hi)
-        got = land(mid)
-        if got is None:
-            hi = mid
-        else:
-            lo, best = mid, got
-    return best
+    return latest_feasible(land, s0, end, LAND_STEPS)[0]
 
 
 def _failed(broken: list | None, k: int) -> None:

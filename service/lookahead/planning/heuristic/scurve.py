@@ -186,6 +186,24 @@ class SCurveSolver:
         return Phases(duration=arr[0], jerk=arr[1], acc=arr[2], vel=arr[3], pos=arr[4])
 
 
+def latest_feasible(attempt, lo: float, hi: float, steps: int, tol: float = 0.0,
+                    best=None) -> tuple:
+    """Bisection for the largest x in [lo, hi] at which `attempt(x)` is not None (the
+    feasible x forming an interval from lo): (the last success, or `best` where none
+    came, and its x, lo where none came), after `steps` halvings or once the bracket
+    is within `tol`."""
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        trial = attempt(mid)
+        if trial is None:
+            hi = mid
+        else:
+            lo, best = mid, trial
+        if hi - lo <= tol:
+            break
+    return best, lo
+
+
 def end_state(phases: Phases) -> tuple[float, float, float]:
     """(s, v, a) at the end of the last phase."""
     h, j, a, v, s = (float(x[-1]) for x in (phases.duration, phases.jerk, phases.acc,

@@ -21,6 +21,7 @@ from lookahead.planning.heuristic.scurve import (
     Phases,
     SCurveSolver,
     SegmentInfeasibleError,
+    latest_feasible,
     reachable_feed,
 )
 
@@ -95,18 +96,8 @@ def first_segment(solver: SCurveSolver, request: PlanRequest, b: SegmentBudgets,
             lo = float(w)
     if lo is None:
         raise SegmentInfeasibleError("no end feed reachable from the start state")
-    hi = min(w1_hi, lo + w1_hi / 8.0)
-    best = attempt(lo)
-    for _ in range(30):
-        mid = 0.5 * (lo + hi)
-        trial = attempt(mid)
-        if trial is None:
-            hi = mid
-        else:
-            lo, best = mid, trial
-        if hi - lo <= 1e-6 * max(w1_hi, 1e-12):
-            break
-    return best, lo
+    return latest_feasible(attempt, lo, min(w1_hi, lo + w1_hi / 8.0), 30,
+                           1e-6 * max(w1_hi, 1e-12), attempt(lo))
 
 
 def first_caps(v0: float, a0: float, V: float, A: float, margin: float) -> tuple[float, float]:

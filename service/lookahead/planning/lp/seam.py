@@ -17,7 +17,6 @@ import numpy as np
 from scipy.interpolate import PPoly
 
 from lookahead.geometry.base import Path
-from lookahead.limits import AxisLimits
 from lookahead.planning.base import FeedProfile, PlanRequest
 from lookahead.planning.lp.envelope import braking_distance, path_limits
 from lookahead.planning.lp.rows import GridGeometry, Tightening, velocity_caps
@@ -84,7 +83,7 @@ def find_seam(last: LastPlan | None, request: PlanRequest) -> Seam | None:
     if last is None or start.v <= REST:
         return None
     old = last.request
-    if request.dt != old.dt or not same_limits(request.limits, old.limits):
+    if request.dt != old.dt or not request.limits.same_as(old.limits):
         return None
     s = last.geo.s
     i = int(np.searchsorted(s, start.s, side="right")) - 1
@@ -158,12 +157,6 @@ def join_last(last: LastPlan, first: int, stop: int, tail: LastPlan,
         np.concatenate([last.q[kept], tail.q]), np.concatenate([last.a[kept], tail.a]),
         tight, np.concatenate([old_stops, tail.stop_idx + (stop - first)]).astype(int),
         concatenate([head, tail.profile]))
-
-
-def same_limits(a: AxisLimits, b: AxisLimits) -> bool:
-    """True if both limits are equal exactly, per axis."""
-    return (a is b) or (np.array_equal(a.vmax, b.vmax) and np.array_equal(a.amax, b.amax)
-                        and np.array_equal(a.jmax, b.jmax))
 
 
 def time_at(profile: FeedProfile, piece: int, s: float) -> float | None:
