@@ -114,3 +114,52 @@ def test_a_refused_valley_is_replanned_without_it_in_the_same_round(dome, monkey
     without = HeuristicPlanner(margin=1.0, layouts=layouts, valleys=False).plan(request)
     # the other valley kept: between the plan with both and the plan with none
     assert free.profile.duration <= result.profile.duration < without.profile.duration
+
+
+def test_apex_feeds_above_a_knot_cap_are_skipped_with_the_same_valleys(monkeypatch):
+    """A C1 path's knot caps (hard bounds no valley may pass) make most of its cap minima
+    valleys whose apex feed lies above the apex cell's bound: `valley._best` skips those
+    apex feeds before their span searches. The valleys found are the same as with every
+    apex feed searched, with far fewer span searches."""
+    import lookahead.planning.heuristic.valley as valley
+
+    p = load_corpus("all", pattern="w-hel-R100-a45-sine-2mm-pchip")[0]
+    path = p.path()
+    request = PlanRequest(path, p.config.machine.limits.scaled(p.config.planner.margin),
+                          PathState(0.0), path.length, dt=p.config.machine.dt)
+    planner = HeuristicPlanner(margin=1.0)
+    limits = request.limits
+    grid, _ = planner._grid(request, request.start, limits)
+    assert np.isfinite(grid.c1_cap).any()
+    layout = heuristic_planner.COARSE
+    vlim = feed_limit(grid, limits, layout.shares, request.feed_cap)
+    starts = choose_segments(grid, vlim, layout.band_ratio)
+    b = segment_budgets(grid, starts, vlim, limits, layout.shares)
+    b, levels = level_budgets(grid, starts, vlim, limits, layout.shares, b, None, None,
+                              layout.levels)
+    cap = junction_caps(request, grid, starts, b)
+    spans = []
+    real_span = valley._span
+
+    def counted(*args):
+        spans.append(1)
+        return real_span(*args)
+
+    monkeypatch.setattr(valley, "_span", counted)
+
+    def search():
+        spans.clear()
+        got = find_valleys(grid, starts, b, levels, vlim, cap, limits, layout.shares,
+                           neighbour_min(b.J), hard=grid.c1_cap)
+        return got, len(spans)
+
+    skipped, n_skipped = search()
+    monkeypatch.setattr(valley, "_HARD_ROOM", np.inf)  # every apex feed searched
+    full, n_full = search()
+    assert len(skipped) == len(full)
+    for a, c in zip(skipped, full, strict=True):
+        assert (a.k0, a.k1, a.entry, a.exit) == (c.k0, c.k1, c.entry, c.exit)
+        for x, y in zip((a.phases.duration, a.phases.jerk), (c.phases.duration, c.phases.jerk),
+                        strict=True):
+            np.testing.assert_array_equal(x, y)
+    assert n_skipped < 0.5 * n_full
