@@ -59,6 +59,7 @@ from lookahead.planning.heuristic.path_limits import (
     build_grid,
     choose_segments,
     feed_limit,
+    rough_cells,
     segment_budgets,
 )
 from lookahead.planning.heuristic.profile_build import build_profile, concat_phases
@@ -641,6 +642,7 @@ class HeuristicPlanner:
         if layout.max_segments is not None and starts.size - 1 > layout.max_segments:
             raise PlanningError(f"heuristic: layout of {starts.size - 1} segments skipped")
         factor = np.ones(starts.size - 1)
+        rough = rough_cells(grid, request.limits, vlim)
         info: dict = {"rounds": 0, "verified": False, "zero_junction_rounds": 0}
         phases = None
         ban = np.zeros(starts.size - 1, dtype=bool)  # no valley touches these segments
@@ -664,8 +666,13 @@ class HeuristicPlanner:
                 failing = sampled_failing_segments(request.path, profile, grid, starts,
                                                    request.limits, request.dt)
                 info["sampled_repairs"] = info.get("sampled_repairs", 0) + int(failing.any())
-            elif not failing.any() and fixed is not None and fixed.size == failing.size:
-                failing = sampled_failing_runs(request.path, profile, grid, starts, fixed,
+            elif not failing.any():
+                # the finite differences over valleys and rough cells, which the grid
+                # points may pass between their peaks
+                runs = np.logical_or.reduceat(rough, starts[:-1])
+                if fixed is not None and fixed.size == failing.size:
+                    runs |= fixed
+                failing = sampled_failing_runs(request.path, profile, grid, starts, runs,
                                                request.limits, request.dt)
             info["rounds"] = round_ + 1
             if not failing.any():
