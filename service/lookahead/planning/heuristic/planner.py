@@ -16,8 +16,10 @@ repaired, on several layouts of planning segments (the fastest verified plan win
    verification refuses is dropped, the round planned again). Steps 1-4 run per
    `Layout` (band ratio, budget shares); the fastest verified profile is returned.
 4. Verification of axis velocity, acceleration and jerk at the budget and check points
-   (`verify`); failing segments get their V, A, J lowered and steps 2-4 repeat. A profile
-   that still fails raises PlanningError (never an unverified profile).
+   (`verify`), and by the checker's finite differences over the valleys and the cells the
+   points do not resolve (`path_limits.rough_cells`); failing segments get their V, A, J
+   lowered and steps 2-4 repeat. A profile that still fails raises PlanningError (never
+   an unverified profile).
 5. A start above the limits (override down, lower feed cap): first a brake (`brake`), then
    steps 1-4 from where it ends. A start above the feed limit but within the axis limits
    (inside a valley motion of the last plan, or of a wider layout's): steps 1-4 from it,
