@@ -7,6 +7,7 @@ and optionally a feed cap. Units: X mm, C deg (path_scale of the winder) unless 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +22,21 @@ MACHINE = default_config().machine
 DT = MACHINE.dt
 SCALE = np.asarray(MACHINE.path_scale)
 LIMITS = MACHINE.limits
+
+
+def random_polyline(angles_deg: list[float], signs: list[bool], lengths: list[float],
+                    scale: np.ndarray) -> np.ndarray:
+    """2-axis points whose metric polyline turns by the given angles (axis units; scale:
+    the path scale, axis units to path units): left where signs[i], else right."""
+    heading = 0.0
+    pts = [np.zeros(2)]
+    for i, length in enumerate(lengths):
+        if i:
+            turn = math.radians(angles_deg[i - 1])
+            heading += turn if signs[i - 1] else -turn
+        step = length * np.array([math.cos(heading), math.sin(heading)])
+        pts.append(pts[-1] + step / scale)
+    return np.array(pts)
 
 
 @dataclass(frozen=True)

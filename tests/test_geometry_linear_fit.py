@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from heuristic_paths import random_polyline
 from lookahead.checker import check_positions
 from lookahead.config import default_config
 from lookahead.geometry.deviation import path_deviation, polyline_distance
@@ -31,20 +32,6 @@ def plan(path, method: str = "heuristic"):
     result = make_planner(method).plan(PlanRequest(path, limits, PathState(0.0), path.length,
                                                    dt=MACHINE.dt))
     return result, sample_plan(path, result.profile, MACHINE.dt)
-
-
-def random_polyline(angles_deg: list[float], signs: list[bool], lengths: list[float],
-                    scale: np.ndarray) -> np.ndarray:
-    """2-axis points whose metric polyline turns by the given angles (axis units)."""
-    heading = 0.0
-    pts = [np.zeros(2)]
-    for i, length in enumerate(lengths):
-        if i:
-            turn = math.radians(angles_deg[i - 1])
-            heading += turn if signs[i - 1] else -turn
-        step = length * np.array([math.cos(heading), math.sin(heading)])
-        pts.append(pts[-1] + step / scale)
-    return np.array(pts)
 
 
 def test_zigzag_stays_within_tolerance_and_passes_the_checker() -> None:

@@ -6,11 +6,10 @@ grid check had passed was sampled at 1.035 jmax (20702 against 20000 mm/s^3 on X
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
+from heuristic_paths import random_polyline
 from lookahead.checker import check_positions
 from lookahead.config import default_config
 from lookahead.geometry.fits import fit_path
@@ -24,26 +23,14 @@ MACHINE = default_config().machine
 SCALE = np.asarray(MACHINE.path_scale)
 
 
-def polyline(turns_deg: list[float], left: list[bool], lengths: list[float]) -> np.ndarray:
-    """X/C points (mm, deg) whose metric polyline turns by the given angles."""
-    heading, pts = 0.0, [np.zeros(2)]
-    for i, length in enumerate(lengths):
-        if i:
-            turn = math.radians(turns_deg[i - 1])
-            heading += turn if left[i - 1] else -turn
-        step = length * np.array([math.cos(heading), math.sin(heading)])
-        pts.append(pts[-1] + step / SCALE)
-    return np.array(pts)
-
-
 @pytest.fixture(scope="module")
 def blends():
     """The failing example hypothesis found: sharp turns between 0.4-1 mm lines, blended
     within 1 mm, beside two 200 mm strokes."""
-    pts = polyline([151.0, 1.0, 47.0, 45.0, 1.0, 136.0, 106.0, 1.0, 1.0],
-                   [True, False, False, True, False, False, False, False, False],
-                   [1.0, 1.0, 1.0, 200.0, 1.0, 200.0, 10.0 ** -0.375, 10.0 ** -0.0625,
-                    1.0, 1.0])
+    pts = random_polyline([151.0, 1.0, 47.0, 45.0, 1.0, 136.0, 106.0, 1.0, 1.0],
+                          [True, False, False, True, False, False, False, False, False],
+                          [1.0, 1.0, 1.0, 200.0, 1.0, 200.0, 10.0 ** -0.375,
+                           10.0 ** -0.0625, 1.0, 1.0], SCALE)
     path = fit_path(pts, SCALE, "linear", 1.0)
     limits = MACHINE.limits.scaled(default_config().planner.margin)
     return PlanRequest(path, limits, PathState(0.0), path.length, dt=MACHINE.dt)
