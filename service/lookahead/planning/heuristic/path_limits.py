@@ -347,7 +347,12 @@ def _c1_knot_zones(path: Path, nodes: np.ndarray, nodes_u: np.ndarray, knots: np
     _, _, left, _ = s_derivatives_at_u(path, nodes_u[idx] - du)
     sigma, _, right, _ = s_derivatives_at_u(path, nodes_u[idx] + du)
     jump = np.abs(right - left)
-    typical = np.max(np.abs(np.concatenate([left, right]))) + 1.0 / max(np.ptp(nodes), _TINY)
+    # a jump is rounding below 1e-7 of its own knot's |x_ss| (per knot: one knot where the
+    # parametrization nearly stops, sigma ~ 1e-3, has |x_ss| ~ 1e6 and made every other
+    # knot's jump "rounding" when the scale was the window's largest: a pchip path cruised
+    # through its C1 knots at 6x their caps, 12x jmax in the checker)
+    typical = np.max(np.abs(np.concatenate([left, right], axis=1)), axis=1, keepdims=True) \
+        + 1.0 / max(np.ptp(nodes), _TINY)
     jump = np.where(jump > 1e-7 * typical, jump, 0.0)
     with np.errstate(divide="ignore"):
         cap = np.min(np.sqrt(shares.c1_knot * limits.jmax * dt / jump), axis=1)
