@@ -114,6 +114,18 @@ def wandering_points(seed: int, npts: int = 12) -> np.ndarray:
     return np.cumsum(np.vstack([[0.0, 0.0], np.c_[dx, dc]]), axis=0)
 
 
+def random_walk(seed: int, naxes: int, npoints: int, log_step: float, log_spread: float,
+                fit: str) -> tuple[Path, AxisLimits]:
+    """The path and limits of a case of `bench/fuzz_paths.py` (a random walk of `npoints`
+    in `naxes` axes, steps ~10^log_step with each axis scaled by up to 10^|log_spread|,
+    fitted by `fit`; limits over decades), which its `--case` replays."""
+    from bench.fuzz_paths import build
+
+    built = build((seed, naxes, npoints, log_step, log_spread, fit))
+    assert built is not None, "the case makes no path"
+    return built
+
+
 def near_zero_cap(path: Path) -> FeedCap:
     """A feed cap with two stretches at a crawl (1 mm at 0.2 mm/s, 10 mm at 2 mm/s: 5 s
     each) and a high rest."""

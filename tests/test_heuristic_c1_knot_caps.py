@@ -10,9 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from heuristic_paths import random_walk
 from lookahead.checker import check_positions
-from lookahead.geometry.fits import fit_path
-from lookahead.limits import AxisLimits
 from lookahead.planning.base import PathState, PlanRequest
 from lookahead.planning.heuristic import HeuristicPlanner
 from lookahead.planning.heuristic.path_limits import s_derivatives_at_u
@@ -25,15 +24,7 @@ DT = 0.001
 def wander():
     """A seeded random walk of 27 points in 2 axes of very different scales, pchip-fitted,
     with seeded limits (axis 1: 5.9 units/s, 27 units/s^2, 90 units/s^3)."""
-    rng = np.random.default_rng(922)
-    steps = (rng.normal(size=(27, 2)) * 10**0.2041682243127707
-             * 10 ** (rng.uniform(-1, 1, size=2) * 1.3482320782172486))
-    points = np.cumsum(steps, axis=0)
-    vmax = 10 ** rng.uniform(0, 3, 2)
-    amax = vmax * 10 ** rng.uniform(0.5, 1.5, 2)
-    jmax = amax * 10 ** rng.uniform(0.5, 1.5, 2)
-    path = fit_path(points, np.ones(2), "pchip")
-    return path, AxisLimits(vmax, amax, jmax)
+    return random_walk(922, 2, 27, 0.2041682243127707, 1.3482320782172486, "pchip")
 
 
 def test_a_near_stop_knot_does_not_hide_the_other_knots_jumps(wander):

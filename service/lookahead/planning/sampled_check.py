@@ -47,8 +47,11 @@ class SampledRatios:
 
     @property
     def worst(self) -> float:
-        return float(max(self.vel.max(initial=0.0), self.acc.max(initial=0.0),
-                         self.jerk.max(initial=0.0)))
+        """The largest ratio; inf if any is NaN (a value not known is not within the
+        limits: Python's max() skipped a NaN array's maximum, and one NaN sample hid a
+        plan's every jerk excess, 4.2x jmax, from the LP's repairs)."""
+        peaks = [float(r.max(initial=0.0)) for r in (self.vel, self.acc, self.jerk)]
+        return np.inf if any(np.isnan(p) for p in peaks) else max(peaks)
 
     def merged(self, other: SampledRatios) -> SampledRatios:
         return SampledRatios(*(np.concatenate([a, b]) for a, b in zip(
@@ -87,6 +90,37 @@ def profile_ratios(path: Path, profile: FeedProfile, limits: AxisLimits, dt: flo
     return SampledRatios(*ratios, *times)
 
 
+#: `analytic_ratios` evaluates this many samples at a time: its ~40 temporary arrays per
+#: sample took 20 GB at once for a fuzzed pchip walk's whole-job plan of 16656 s, which
+#: crawled over grid intervals at a knot cap of ~1e-4 units/s (`bench/fuzz_paths.py
+#: --method lp`, case 2069, before `lp.knots.knot_steps`); in chunks, ~0.3 GB
+CHECK_CHUNK = 1_000_000
+#: a sample whose ds/du is below this fraction of the grid's median is at a corner where
+#: the fit stops (a pchip knot with x_u = 0 in every axis): x_sss there is the difference
+#: of terms ~ 1/sigma^3 .. 1/sigma^5, whose rounding grows like eps (median / sigma)^2
+#: relative (2e-4 at this ratio), and its value is judged by the samples around
+#: (`fill_undefined`). Measured: a fuzzed pchip walk's plan at rest 15 us after such a
+#: corner read sigma 5e-14, x_sss 2.5e52 (1e12 x its true size), 2e18 x jmax, and
+#: failed every repair (`bench/fuzz_paths.py`, case 377)
+SINGULAR_SIGMA = 1e-6
+
+
+def fill_undefined(ratio: np.ndarray) -> None:
+    """In place: each NaN ratio (a sample where ds/du = 0 or nearly, `SINGULAR_SIGMA`: a
+    corner at which a pchip fit stops in every axis, so that the s-derivatives are 0/0
+    or rounding) becomes the larger of its neighbours' (0 if they are NaN too).
+
+    Why the neighbours: the plan passes such a corner at rest, and x_ss grows like
+    |s - corner|^(-1/2) beside it, so no one-sided value exists; the checker's
+    differences average the motion over the samples around, which are judged."""
+    bad = np.isnan(ratio)
+    if not np.any(bad):
+        return
+    padded = np.concatenate([[np.nan], ratio, [np.nan]])
+    near = np.fmax(padded[:-2], padded[2:])
+    ratio[bad] = np.nan_to_num(near[bad], nan=0.0)
+
+
 def analytic_ratios(path: Path, profile: FeedProfile, limits: AxisLimits,
                     geo: GridGeometry, step: float) -> SampledRatios:
     """The continuous axis velocity, acceleration and jerk over their limits at t = k step
@@ -101,21 +135,33 @@ def analytic_ratios(path: Path, profile: FeedProfile, limits: AxisLimits,
     fast corpus's unmarked intervals), so it does not need the
     exact arc-length inversion that dominates `profile_ratios`; except on the intervals
     `geo.rough` marks (ds/du changes too much there for a cubic, `rows.rough_intervals`),
-    whose samples get the exact inversion.
+    whose samples get the exact inversion. Evaluated CHECK_CHUNK samples at a time.
     """
     if geo.u is None or geo.sigma is None:
         raise ValueError("analytic_ratios needs a GridGeometry sampled with u and sigma")
     t = np.arange(int(np.ceil(profile.duration / step)) + 1) * step
-    s, v, a, j = profile.at(t)
-    u = CubicHermiteSpline(geo.s, geo.u, 1.0 / geo.sigma, extrapolate=True)(s)
-    if geo.rough is not None and np.any(geo.rough):
-        interval = np.clip(np.searchsorted(geo.s, s, side="right") - 1, 0, geo.rough.size - 1)
-        exact = geo.rough[interval]
-        if np.any(exact):
-            u[exact] = path.u_of_s(s[exact])
-    d1, d2, d3, _ = s_derivatives(path.eval_u(u, order=3), path.path_scale)
-    v, a, j = v[:, None], a[:, None], j[:, None]
-    vel = np.max(np.abs(d1 * v) / limits.vmax, axis=1)
-    acc = np.max(np.abs(d2 * v * v + d1 * a) / limits.amax, axis=1)
-    jerk = np.max(np.abs(d3 * v**3 + 3.0 * d2 * v * a + d1 * j) / limits.jmax, axis=1)
+    u_of_s = CubicHermiteSpline(geo.s, geo.u, 1.0 / geo.sigma, extrapolate=True)
+    sigma_floor = SINGULAR_SIGMA * np.median(geo.sigma)
+    vel, acc, jerk = np.empty(t.size), np.empty(t.size), np.empty(t.size)
+    for lo in range(0, t.size, CHECK_CHUNK):
+        part = slice(lo, lo + CHECK_CHUNK)
+        s, v, a, j = profile.at(t[part])
+        u = u_of_s(s)
+        if geo.rough is not None and np.any(geo.rough):
+            interval = np.clip(np.searchsorted(geo.s, s, side="right") - 1, 0,
+                               geo.rough.size - 1)
+            exact = geo.rough[interval]
+            if np.any(exact):
+                u[exact] = path.u_of_s(s[exact])
+        d1, d2, d3, sigma = s_derivatives(path.eval_u(u, order=3), path.path_scale)
+        v, a, j = v[:, None], a[:, None], j[:, None]
+        vel[part] = np.max(np.abs(d1 * v) / limits.vmax, axis=1)
+        acc[part] = np.max(np.abs(d2 * v * v + d1 * a) / limits.amax, axis=1)
+        jerk[part] = np.max(np.abs(d3 * v**3 + 3.0 * d2 * v * a + d1 * j) / limits.jmax,
+                            axis=1)
+        singular = ~(sigma >= sigma_floor)
+        for out in (vel, acc, jerk):
+            out[part][singular] = np.nan
+    for out in (vel, acc, jerk):
+        fill_undefined(out)
     return SampledRatios(vel, acc, jerk, t, t, t)

@@ -196,11 +196,17 @@ def break_steps(feed_cap: FeedCap, s_feat: np.ndarray, step: np.ndarray, h: floa
     if b.size == 0:
         return s_feat, step
     low = np.minimum(feed_cap.at(b), feed_cap.at(np.nextafter(b, -np.inf)))
-    want = np.clip(h * low / v_top, MIN_STEP_FRACTION * h, h)
-    s_all = np.concatenate([s_feat, b])
+    return point_steps(s_feat, step, b, np.clip(h * low / v_top, MIN_STEP_FRACTION * h, h))
+
+
+def point_steps(s_feat: np.ndarray, step: np.ndarray, points: np.ndarray, want: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """The wanted spacing `step` (at arc lengths s_feat) with a sample at each of `points`
+    (inside the span) wanting no more than `want` there (path units)."""
+    s_all = np.concatenate([s_feat, points])
     order = np.argsort(s_all, kind="stable")
-    at_b = np.interp(b, s_feat, step)
-    return s_all[order], np.concatenate([step, np.minimum(want, at_b)])[order]
+    at_points = np.interp(points, s_feat, step)
+    return s_all[order], np.concatenate([step, np.minimum(want, at_points)])[order]
 
 
 def refine_grid(nodes: np.ndarray, stop_idx: np.ndarray, s_feat: np.ndarray,
@@ -260,8 +266,15 @@ def graded_steps(s: np.ndarray, step: np.ndarray) -> np.ndarray:
 #: a turn of the tangent (path metric) by more than this between feature samples marks a
 #: hidden near-reversal (cos of 120 deg)
 REVERSAL_COS = -0.5
-#: points per bracket in the search for a near-reversal's sharpest point (two rounds)
+#: points per bracket in the search for a near-reversal's sharpest point, at least two
+#: rounds and then more (up to REVERSAL_ROUNDS) while the bracket is wider than
+#: REVERSAL_PRECISION x the radius of curvature there: two rounds put the rest node of a
+#: fuzzed cubic walk's 179 deg turn (radius 3.8e-5, grid step 2.9) 1.4e-4 off its sharpest
+#: point, which the plan passed at 3.5x jmax, every repair stuck (`bench/fuzz_paths.py
+#: --method lp`, case 2); on the corpus three of the eight move by 5e-6 .. 7e-5
 REVERSAL_SEARCH = 65
+REVERSAL_ROUNDS = 8
+REVERSAL_PRECISION = 0.1
 
 
 def near_reversals(path, h: float, samples_per_step: int = 4) -> np.ndarray:
@@ -289,11 +302,13 @@ def near_reversals(path, h: float, samples_per_step: int = 4) -> np.ndarray:
         lo, hi = s[i], s[i_end]
         if any(lo <= f <= hi for f in found):
             continue
-        for _ in range(2):
+        for rounds in range(1, REVERSAL_ROUNDS + 1):
             x = np.linspace(lo, hi, REVERSAL_SEARCH)
             k = np.max(np.abs(path.eval_s(x, 2)[2] * scale), axis=1)
             j = int(np.argmax(k))
             lo, hi = x[max(j - 1, 0)], x[min(j + 1, x.size - 1)]
+            if rounds >= 2 and (hi - lo) * k[j] < REVERSAL_PRECISION:
+                break
         if k[j] * MIN_STEP_FRACTION * h > 1.0:
             found.append(float(x[j]))
     return np.array(found)

@@ -11,14 +11,24 @@ from __future__ import annotations
 
 import numpy as np
 
-from lookahead.geometry.base import Path
+from lookahead.geometry.base import Path, arc_length_derivatives
 from lookahead.limits import AxisLimits
+from lookahead.planning.lp.grid import MIN_STEP_FRACTION, point_steps
 
 #: the checker's third difference over samples dt apart of a step D in the axis
 #: acceleration (a C1 knot passed at feed v: D = |jump of x_ss| v^2) peaks at this times
 #: D / dt, for a step midway between two samples (the weights are theta^2 / 2,
 #: (1 + 2 theta - 2 theta^2) / 2, (1 - theta)^2 / 2 at a step theta of a sample step in)
 KNOT_FD_SHARE = 0.75
+
+
+#: the one-sided limits of x_ss at a knot are taken this far (relative to |u|, at least
+#: 1) to either side of it in the path parameter u. They were taken 1e-7 x the path's
+#: length to either side in s: 3.4e-4 on a fuzzed 3380-unit pchip walk, where x_ss moved
+#: from 50 to 539 within 1e-5 of a knot at which the fit nearly stops (x_sss ~ 1e5): the
+#: jump read 150 instead of 489, and the LP's plan crossed the knot at 1.03 jmax in the
+#: checker (`bench/fuzz_paths.py --method lp`, case 7999)
+KNOT_SIDE_DU = 1e-9
 
 
 def knot_jumps_between(path: Path, lo: float, hi: float
@@ -31,25 +41,67 @@ def knot_jumps_between(path: Path, lo: float, hi: float
     knots = knots[(knots > lo) & (knots < hi)]
     if knots.size == 0:
         return None
-    eps = 1e-7 * max(path.length, 1.0)
-    jump = np.abs(path.eval_s(knots + eps, 2)[2] - path.eval_s(knots - eps, 2)[2])
-    return knots, jump
+    u = path.u_of_s(knots)
+    # one-sided limits in u (KNOT_SIDE_DU), not a step in s relative to the path's length
+    du = KNOT_SIDE_DU * np.maximum(np.abs(u), 1.0)
+    scale = np.asarray(path.path_scale, dtype=float)
+    left = arc_length_derivatives(path.eval_u(u - du, order=3), scale)[2]
+    right = arc_length_derivatives(path.eval_u(u + du, order=3), scale)[2]
+    return knots, np.abs(right - left)
 
 
 def c1_knot_caps(path: Path, s: np.ndarray, limits: AxisLimits, dt: float) -> np.ndarray:
     """Feed cap at the nodes next to C1 knots: sqrt(jmax dt / |jump of x_ss|) (DESIGN.md)."""
     caps = np.full(s.size, np.inf)
-    found = knot_jumps_between(path, s[0], s[-1])
+    found = knot_caps(path, s[0], s[-1], limits, dt)
     if found is None:
         return caps
-    knots, jump = found
-    with np.errstate(divide="ignore"):
-        vcap = np.min(np.sqrt(limits.jmax * dt / jump), axis=1)
+    knots, vcap = found
     idx = np.searchsorted(s, knots)
     for lo, v in zip(idx, vcap, strict=True):
         sl = slice(max(lo - 2, 0), min(lo + 2, s.size))
         caps[sl] = np.minimum(caps[sl], v)
     return caps
+
+
+def knot_caps(path: Path, lo: float, hi: float, limits: AxisLimits, dt: float
+              ) -> tuple[np.ndarray, np.ndarray] | None:
+    """(knots, feed cap per knot) of the C1 knots strictly inside (lo, hi): the feed
+    sqrt(jmax dt / |jump of x_ss|) at which the jump alone reaches the jerk limit, the
+    least over the axes (path units / s); None on a C2 path or when there is none."""
+    found = knot_jumps_between(path, lo, hi)
+    if found is None:
+        return None
+    knots, jump = found
+    with np.errstate(divide="ignore"):
+        return knots, np.min(np.sqrt(limits.jmax * dt / jump), axis=1)
+
+
+#: the finest node spacing at a C1 knot, as a fraction of the nominal step h (the
+#: feature and limit-curve spacing stops at `grid.MIN_STEP_FRACTION` = 1/64)
+KNOT_MIN_STEP_FRACTION = 1.0 / 4096.0
+
+
+def knot_steps(path: Path, limits: AxisLimits, dt: float, s_feat: np.ndarray,
+               step: np.ndarray, h: float, v_top: float) -> tuple[np.ndarray, np.ndarray]:
+    """The wanted spacing `step` (at arc lengths s_feat, path units) with a sample at each
+    C1 knot inside, wanting there h v_k / v_top for the knot's cap v_k (`knot_caps`):
+    nodes no further apart in time at the cap than h at the top feed, as
+    `grid.limit_curve_steps` and `grid.break_steps` want at low feeds, down to
+    KNOT_MIN_STEP_FRACTION h; `grid.refine_grid` grades it back to the spacing around.
+
+    Why: a knot where the fit nearly stops has a cap far below the feed around it, and
+    the landing on it between nodes h / 64 apart (the floor elsewhere) is a jump of the
+    reconstruction's acceleration: a fuzzed pchip walk braked from 0.83 to 0.025 units/s
+    within one such interval at 4.2x jmax, which no repair removed (`bench/fuzz_paths.py
+    --method lp`, case 2069)."""
+    found = knot_caps(path, float(s_feat[0]), float(s_feat[-1]), limits, dt)
+    if found is None:
+        return s_feat, step
+    knots, cap = found
+    deep = cap < MIN_STEP_FRACTION * v_top
+    want = np.maximum(h * cap[deep] / v_top, KNOT_MIN_STEP_FRACTION * h)
+    return point_steps(s_feat, step, knots[deep], want)
 
 
 def knot_jumps(path: Path, s: np.ndarray) -> np.ndarray | None:

@@ -103,7 +103,7 @@ from lookahead.planning.lp.grid import (
     with_breaks,
 )
 from lookahead.planning.lp.handover import plan_handed_over
-from lookahead.planning.lp.knots import c1_knot_caps, knot_fd_ratio, knot_jumps
+from lookahead.planning.lp.knots import c1_knot_caps, knot_fd_ratio, knot_jumps, knot_steps
 from lookahead.planning.lp.profile import (
     grid_time,
     node_accelerations,
@@ -866,7 +866,7 @@ class LPPlanner:
                                       request.v_end <= REST, corners, old_stops)
             s, stop_idx = self.refine(request.path, s, stop_idx, h, first=seam.n_reuse - 1,
                                       limits=self._grid_limits(request),
-                                      feed_cap=request.feed_cap)
+                                      feed_cap=request.feed_cap, dt=request.dt)
             if request.feed_cap is not None:
                 s, stop_idx = with_breaks(s, stop_idx, request.feed_cap.changes(),
                                           first=seam.n_reuse - 1)
@@ -897,7 +897,7 @@ class LPPlanner:
         s, stop_idx = build_grid(s0, s1, h, request.start.v <= REST, request.v_end <= REST,
                                  corners)
         s, stop_idx = self.refine(request.path, s, stop_idx, h, limits=self._grid_limits(request),
-                                  feed_cap=request.feed_cap)
+                                  feed_cap=request.feed_cap, dt=request.dt)
         if request.feed_cap is not None:
             s, stop_idx = with_breaks(s, stop_idx, request.feed_cap.changes())
         if self._split is not None:
@@ -910,13 +910,15 @@ class LPPlanner:
 
     def refine(self, path: Path, s: np.ndarray, stop_idx: np.ndarray, h: float,
                first: int = 0, limits: AxisLimits | None = None,
-               feed_cap: FeedCap | None = None) -> tuple[np.ndarray, np.ndarray]:
+               feed_cap: FeedCap | None = None, dt: float | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
         """Finer nodes where the path bends sharply (`lp.grid.refine_grid`), from node
         `first` on, judged on samples FEATURE_SAMPLES per nominal step h apart, and finer
         where a bend hides between two of them (`lp.grid.feature_samples`); with `limits`,
         also where the limit-curve feed is low (`lp.grid.limit_curve_steps`: nodes no
         further apart in time there than h at the top feed), and likewise at the changes
-        of `feed_cap` at the lower cap (`lp.grid.break_steps`)."""
+        of `feed_cap` at the lower cap (`lp.grid.break_steps`), and with the sample time
+        `dt` too at a C1 path's knots at their caps (`lp.knots.knot_steps`)."""
         lo, hi = float(s[first]), float(s[-1])
         if not hi > lo:
             return s, stop_idx
@@ -929,6 +931,8 @@ class LPPlanner:
             step = np.minimum(step, limit_curve_steps(feed, h, v_top))
         if limits is not None and feed_cap is not None:
             s_feat, step = break_steps(feed_cap, s_feat, step, h, v_top)
+        if limits is not None and dt is not None and path.continuity() < 2:
+            s_feat, step = knot_steps(path, limits, dt, s_feat, step, h, v_top)
         return refine_grid(s, stop_idx, s_feat, step, first)
 
     def solve_grid(

@@ -316,6 +316,22 @@ def jerk_operator(geo: GridGeometry, axis: int) -> tuple[np.ndarray, np.ndarray]
     return coef, nodes
 
 
+def knot_tangent_point(q_star: np.ndarray, J: np.ndarray, knot: np.ndarray) -> np.ndarray:
+    """The linearization point of a jerk row with a C1 knot's term (`jerk_rows`): q* no
+    higher than J / knot, where the bound J / sqrt(q) - knot sqrt(q) on |L| reaches 0.
+
+    Why: that bound is convex and +inf at q = 0, but its tangent at q* meets q = 0 at
+    3/2 J / sqrt(q*) - knot sqrt(q*) / 2, below 0 for q* > 3 J / knot: the row then
+    excluded q = 0, and with it every solution where the jump's own cap (`c1_knot_caps`)
+    holds q below J / knot anyway. Measured: fuzzed random pchip paths linearized at
+    their upper bounds, 14 such rows made the whole-job LP infeasible at every grid
+    (`bench/fuzz_paths.py`, case 6439). At q* = J / knot the row reads knot q <= J where
+    L = 0, the bound itself."""
+    with np.errstate(divide="ignore"):
+        top = np.where(knot > 0.0, J / knot, np.inf)
+    return np.minimum(q_star, top)
+
+
 def jerk_rows(
     geo: GridGeometry, jmax: np.ndarray, scale: np.ndarray, q_star: np.ndarray, q_floor: float,
     knot: np.ndarray | None = None,
@@ -326,7 +342,8 @@ def jerk_rows(
     knot: per node and axis (n, naxes), the checker's extra jerk per unit q at a C1 knot
     nearby (`lp.knots.knot_jumps` / dt, s^-1 / path unit^2 ...): the row then bounds
     |jerk| + knot q by J, the tangent of the convex J / sqrt(q) - knot sqrt(q) at q*:
-    +-sqrt(q*) L + (J / (2 q*) + knot / 2) q <= 3/2 J - knot q* / 2 (conservative).
+    +-sqrt(q*) L + (J / (2 q*) + knot / 2) q <= 3/2 J - knot q* / 2 (conservative), with
+    q* no higher than J / knot (`knot_tangent_point`), so that q = 0 satisfies it.
     """
     n = geo.n_nodes
     qs = np.maximum(q_star, q_floor)
@@ -334,13 +351,14 @@ def jerk_rows(
     for k in range(geo.d1.shape[1]):
         coef, nodes = jerk_operator(geo, k)
         J = jmax[k] * scale[nodes]
-        root = np.sqrt(qs[nodes])[:, None]
         kc = np.zeros(nodes.size) if knot is None else knot[nodes, k]
+        qk = knot_tangent_point(qs[nodes], J, kc)
+        root = np.sqrt(qk)[:, None]
         for sign in (1.0, -1.0):
             c = sign * root * coef
-            c[:, 1] += J / (2.0 * qs[nodes]) + 0.5 * kc
+            c[:, 1] += J / (2.0 * qk) + 0.5 * kc
             parts.append(Rows(_tridiagonal(c, nodes, n), np.full(nodes.size, -np.inf),
-                              1.5 * J - 0.5 * kc * qs[nodes]))
+                              1.5 * J - 0.5 * kc * qk))
     parts.append(midpoint_jerk_rows(geo, jmax, scale, qs, q_floor, knot))
     return Rows.stack(parts, n)
 
@@ -389,14 +407,15 @@ def midpoint_jerk_rows(geo: GridGeometry, jmax: np.ndarray, scale: np.ndarray,
     Q, DQ, DDQ, j = midpoint_operators(geo)
     m1, m2, m3 = (m[j] for m in geo.mid)
     known = np.all(np.isfinite(m1) & np.isfinite(m2) & np.isfinite(m3), axis=1)
-    qm = np.maximum(0.5 * (qs[j] + qs[j + 1]), q_floor)
-    root = np.sqrt(qm)[:, None]
+    q_mid = np.maximum(0.5 * (qs[j] + qs[j + 1]), q_floor)
     sj = np.maximum(scale[j], scale[j + 1])  # a relieved start node relieves its interval
     parts = []
     for k in range(geo.d1.shape[1]):
         L = m3[:, k, None] * Q + 1.5 * m2[:, k, None] * DQ + 0.5 * m1[:, k, None] * DDQ
         J = jmax[k] * sj
         kc = np.zeros(j.size) if knot is None else np.maximum(knot[j, k], knot[j + 1, k])
+        qm = knot_tangent_point(q_mid, J, kc)
+        root = np.sqrt(qm)[:, None]
         for sign in (1.0, -1.0):
             c = sign * root * L + (J / (2.0 * qm) + 0.5 * kc)[:, None] * Q
             parts.append(Rows(banded(c[known], j[known] - 1, n),
