@@ -90,10 +90,11 @@ def profile_ratios(path: Path, profile: FeedProfile, limits: AxisLimits, dt: flo
     return SampledRatios(*ratios, *times)
 
 
-#: `analytic_ratios` evaluates this many samples at a time: its ~40 temporary arrays per
-#: sample took 20 GB at once for a fuzzed pchip walk's whole-job plan of 16656 s, which
-#: crawled over grid intervals at a knot cap of ~1e-4 units/s (`bench/fuzz_paths.py
-#: --method lp`, case 2069, before `lp.knots.knot_steps`); in chunks, ~0.3 GB
+#: `analytic_ratios` evaluates this many samples at a time: its temporaries (~40 floats
+#: per sample) took 20 GB at once, and the process was killed, for a fuzzed pchip walk's
+#: whole-job plan of 16656 s that crawled across grid intervals at a knot cap
+#: (`bench/fuzz_paths.py --method lp`, case 2069, before `lp.knots.knot_steps`); in
+#: chunks, ~0.3 GB at most (estimated from the same count)
 CHECK_CHUNK = 1_000_000
 #: a sample whose ds/du is below this fraction of the grid's median is at a corner where
 #: the fit stops (a pchip knot with x_u = 0 in every axis): x_sss there is the difference

@@ -271,7 +271,7 @@ REVERSAL_COS = -0.5
 #: REVERSAL_PRECISION x the radius of curvature there: two rounds put the rest node of a
 #: fuzzed cubic walk's 179 deg turn (radius 3.8e-5, grid step 2.9) 1.4e-4 off its sharpest
 #: point, which the plan passed at 3.5x jmax, every repair stuck (`bench/fuzz_paths.py
-#: --method lp`, case 2); on the corpus three of the eight move by 5e-6 .. 7e-5
+#: --method lp`, case 2); on the corpus 4 of its 6 such points move, by 5e-6 .. 8e-5
 REVERSAL_SEARCH = 65
 REVERSAL_ROUNDS = 8
 REVERSAL_PRECISION = 0.1

@@ -91,10 +91,13 @@ def knot_steps(path: Path, limits: AxisLimits, dt: float, s_feat: np.ndarray,
     KNOT_MIN_STEP_FRACTION h; `grid.refine_grid` grades it back to the spacing around.
 
     Why: a knot where the fit nearly stops has a cap far below the feed around it, and
-    the landing on it between nodes h / 64 apart (the floor elsewhere) is a jump of the
-    reconstruction's acceleration: a fuzzed pchip walk braked from 0.83 to 0.025 units/s
-    within one such interval at 4.2x jmax, which no repair removed (`bench/fuzz_paths.py
-    --method lp`, case 2069)."""
+    between nodes h / 64 apart (the floor elsewhere) the landing on it is a jump of the
+    reconstruction's acceleration, and the cap held at the nodes beside the knot
+    (`c1_knot_caps`) a crawl across whole intervals: on a fuzzed pchip walk
+    (`bench/fuzz_paths.py --method lp`, case 2069) a brake from 0.83 to 0.025 units/s
+    within one interval at 4.2x jmax, which no repair removed, and with the knot's jump
+    read at the knot (larger) a 16656 s plan; with these steps 410 s (the heuristic:
+    45 s, as `c1_knot_caps` still holds each cap on two nodes either side of its knot)."""
     found = knot_caps(path, float(s_feat[0]), float(s_feat[-1]), limits, dt)
     if found is None:
         return s_feat, step
