@@ -931,7 +931,7 @@ class LPPlanner:
             step = np.minimum(step, limit_curve_steps(feed, h, v_top))
         if limits is not None and feed_cap is not None:
             s_feat, step = break_steps(feed_cap, s_feat, step, h, v_top)
-        if limits is not None and dt is not None and path.continuity() < 2:
+        if limits is not None and dt is not None:  # (nothing on a C2 path)
             s_feat, step = knot_steps(path, limits, dt, s_feat, step, h, v_top)
         return refine_grid(s, stop_idx, s_feat, step, first)
 
