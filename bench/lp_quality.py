@@ -39,6 +39,7 @@ REFERENCE_FILES = ("corpus_reference.json", "corpus_heuristic_ref.json")
 #: the combinations measured (LPPlanner keyword arguments; "grid": factor on the step)
 COMBOS: dict[str, dict[str, Any]] = {
     "default": {},
+    "distance": {"objective": "distance"},  # the default before stop 41
     "passes2": {"max_passes": 2},
     "passes3": {"max_passes": 3},
     "time": {"objective": "time"},

@@ -309,6 +309,20 @@ OBJECTIVES = ("distance", "sqrt", "time", "time-late")
 OBJECTIVE_FLOOR = 1e-4
 
 
+def default_objective(solver: str) -> str:
+    """The jerk passes' objective when none is given: "time" for HiGHS, "distance" for
+    OSQP (not measured with "time"; its ADMM is sensitive to the weights' spread).
+
+    Measured (bench/results/lp_quality_objective.json, the 64 non-long corpus paths,
+    whole-job lp and the engine, "time" against "distance" side by side): 0 failures
+    either way; compute summed over the paths 489 -> 240 s (lp) and 291 -> 188 s
+    (engine), the worst x real time 0.84 -> 2.0 (lp) and 0.99 -> 1.79 (engine), all on
+    fiberpath CAM programs, where "distance" left 15-26 free nodes at q = 0 per replan
+    for `_unstall` to lift (4-6 LP solves each) and "time" one; winding time median
+    -0.03 %, worst +3.7 % (c-polyline-deg1-30), best -9.8 % (c-short-bspline-0p05mm)."""
+    return "distance" if solver == "osqp" else "time"
+
+
 def start_limits(geo: GridGeometry, limits: AxisLimits) -> tuple[float, float]:
     """The path acceleration and jerk (path units / s^2, / s^3) the axis limits allow
     along the tangent at the first node, min_k amax_k / |x'_k| and min_k jmax_k / |x'_k|
@@ -365,11 +379,12 @@ class LPPlanner:
     (fraction of the path jerk at the start) of the braking a moving start may keep above
     the LP's velocity caps (`_brake_room`). elastic: last relaxation of an infeasible LP
     from a moving start (`lp.elastic`; off: such a start fails, the caller falls back).
-    objective: the jerk passes' weights c of max c.q: "distance" (default, c = h),
+    objective: the jerk passes' weights c of max c.q: "distance" (c = h),
     "sqrt" (c = h / sqrt(q*)) or "time" (c = h / q*^(3/2), the gradient of the travel
     time sum h / sqrt(q)) at the pass's linearization point q*, floored at
     OBJECTIVE_FLOOR of its peak; "time-late": "time" only where q* is a jerk solution
-    (later passes, repairs), "distance" at the v+a solution (bench/lp_quality.py).
+    (later passes, repairs), "distance" at the v+a solution; None: `default_objective`
+    (bench/lp_quality.py).
     handover: a moving start whose plan still fails is handed over through the transient
     planner's plan to its first zero-acceleration state that the LP plans from
     (`lp.handover`; off: such a start fails, the caller falls back). transient: that
@@ -399,15 +414,15 @@ class LPPlanner:
         start_relief: int = 2,
         brake_jerk: float = BRAKE_JERK,
         elastic: bool = True,
-        objective: str = "distance",
+        objective: str | None = None,
         limit_curve_grid: bool | None = None,
         axis_jerk_change: bool | None = None,
         handover: bool = True,
         transient: Planner | None = None,
     ) -> None:
-        if objective not in OBJECTIVES:
+        if objective is not None and objective not in OBJECTIVES:
             raise ValueError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
-        self.objective = objective
+        self.objective = objective or default_objective(solver)
         self.handover = handover
         self.transient = transient
         self.start_relief = start_relief
@@ -508,6 +523,23 @@ class LPPlanner:
         return self._plan_cold(request, fixed_head)
 
     def _plan_cold(self, request: PlanRequest, fixed_head: np.ndarray | None) -> PlanResult:
+        """`_plan_cold_by`; where it fails under an objective other than "distance", once
+        more by distance (a random walk of bench/fuzz_paths.py, case 2809: pchip knots
+        that cap the feed at 1e-4 units/s, stalls that the time-weighted repairs did not
+        lift where the distance-weighted ones did, a 40.9 s plan)."""
+        try:
+            return self._plan_cold_by(request, fixed_head)
+        except PlanningError:
+            if self.objective == "distance":
+                raise
+        objective, self.objective = self.objective, "distance"
+        try:
+            return self._plan_cold_by(request, fixed_head)
+        finally:
+            self.objective = objective
+
+    def _plan_cold_by(self, request: PlanRequest, fixed_head: np.ndarray | None
+                      ) -> PlanResult:
         """A plan from scratch; if it fails, once more with the jerk margin times
         RETRY_JERK_MARGIN; if its repairs still fail, once more on a grid split 4x where
         they failed (`lp.grid.split_near`, not under a fixed head); if one from rest still
@@ -1002,17 +1034,29 @@ class LPPlanner:
         free = np.ones(geo.n_nodes, dtype=bool)
         free[list(fixed)] = False
         k = 0
+        # a pass left stalled under weights other than "distance" is solved again, and
+        # the passes after it, with the distance weights before its nodes are
+        # re-linearized: at a seam the time weights stem from q* = q_hi beyond the head,
+        # and `_unstall` could not lift the stall (w-hel-R100-a45-dwell-2mm's second
+        # window: a 14.5 s plan with nodes at q = 0, 5.5 s with the retry; the engine's
+        # job 17.1 -> 8.1 s, the distance objective's 8.0 s)
+        by_distance = False
         while True:
             rows = [*base, jerk_rows(geo, lim.jmax, tight.jerk, q_star, q_floor, knot),
                     jerk_change_rows(geo, lim.jmax, q_star, q_floor, self.jerk_step, rest,
                                      axis_jerk=self.axis_jerk_change)]
-            q = self._solve(plan, self._pass_weight(weight, q_star, k > 0 or start_q is not None),
-                            q_lo, q_hi, rows, geo.n_nodes, record=True)
+            w = (weight if by_distance else
+                 self._pass_weight(weight, q_star, k > 0 or start_q is not None))
+            q = self._solve(plan, w, q_lo, q_hi, rows, geo.n_nodes, record=True)
             for i, val in fixed.items():  # exactly, not to the solver's rounding
                 q[i] = val
             q = self._unstall(plan, weight, q, q_lo, q_hi, rows, fixed)
             t = grid_time(geo.s, q)
             plan.pass_times.append(t)
+            if (not np.isfinite(t) and best_q is None and not by_distance
+                    and self.objective != "distance"):
+                by_distance = True
+                continue
             if not np.isfinite(t) and best_q is None and k < STALL_PASSES:
                 # a stalled run (adjacent free nodes at q = 0) that `_unstall` did not
                 # lift: the jerk rows linearized at q_star pin them, so linearize those
