@@ -307,20 +307,19 @@ def stuck_at(s: np.ndarray, trouble: list[float], s_bad: float) -> bool:
 #: weights (a node of q* ~ 0 would get an unbounded weight)
 OBJECTIVES = ("distance", "sqrt", "time", "time-late")
 OBJECTIVE_FLOOR = 1e-4
-
-
-def default_objective(solver: str) -> str:
-    """The jerk passes' objective when none is given: "time" for HiGHS, "distance" for
-    OSQP (not measured with "time"; its ADMM is sensitive to the weights' spread).
-
-    Measured (bench/results/lp_quality_objective.json, the 64 non-long corpus paths,
-    whole-job lp and the engine, "time" against "distance" side by side): 0 failures
-    either way; compute summed over the paths 489 -> 240 s (lp) and 291 -> 188 s
-    (engine), the worst x real time 0.84 -> 2.0 (lp) and 0.99 -> 1.79 (engine), all on
-    fiberpath CAM programs, where "distance" left 15-26 free nodes at q = 0 per replan
-    for `_unstall` to lift (4-6 LP solves each) and "time" one; winding time median
-    -0.03 %, worst +3.7 % (c-polyline-deg1-30), best -9.8 % (c-short-bspline-0p05mm)."""
-    return "distance" if solver == "osqp" else "time"
+#: the default objective since stop 41 (before: "distance"). HiGHS, side by side on the 64
+#: non-long corpus paths (bench/results/lp_quality_objective.json, whole-job lp and the
+#: engine): 0 failures either way; compute summed 489 -> 240 s (lp) and 291 -> 188 s
+#: (engine), worst x real time 0.84 -> 2.0 (lp) and 0.99 -> 1.79 (engine), all on
+#: fiberpath CAM programs, where 15-26 jerk passes per window left free nodes at q = 0
+#: by "distance" for `_unstall` to lift (about 4 more LP solves each), one by "time"
+#: (cam-fp-hel45-D60's three slowest windows, replayed cold); winding time median
+#: -0.03 %, worst +3.7 % (c-polyline-deg1-30), best -9.8 % (c-short-bspline-0p05mm).
+#: OSQP's engine on the 16 fast paths (lp_quality_osqp_objective.json): 0 failures either
+#: way, c-corners-bspline-2d -25 % (6.96 -> 5.21 s), the polar dome -3.7 %, worst +1.8 %
+#: (c-cycloid-near-cusp-a0p995); compute summed 212 -> 106 s without the mill, whose
+#: first window takes twice as long (216 -> 427 s)
+DEFAULT_OBJECTIVE = "time"
 
 
 def start_limits(geo: GridGeometry, limits: AxisLimits) -> tuple[float, float]:
@@ -383,8 +382,8 @@ class LPPlanner:
     "sqrt" (c = h / sqrt(q*)) or "time" (c = h / q*^(3/2), the gradient of the travel
     time sum h / sqrt(q)) at the pass's linearization point q*, floored at
     OBJECTIVE_FLOOR of its peak; "time-late": "time" only where q* is a jerk solution
-    (later passes, repairs), "distance" at the v+a solution; None: `default_objective`
-    (bench/lp_quality.py).
+    (later passes, repairs), "distance" at the v+a solution (DEFAULT_OBJECTIVE: "time";
+    bench/lp_quality.py).
     handover: a moving start whose plan still fails is handed over through the transient
     planner's plan to its first zero-acceleration state that the LP plans from
     (`lp.handover`; off: such a start fails, the caller falls back). transient: that
@@ -414,15 +413,15 @@ class LPPlanner:
         start_relief: int = 2,
         brake_jerk: float = BRAKE_JERK,
         elastic: bool = True,
-        objective: str | None = None,
+        objective: str = DEFAULT_OBJECTIVE,
         limit_curve_grid: bool | None = None,
         axis_jerk_change: bool | None = None,
         handover: bool = True,
         transient: Planner | None = None,
     ) -> None:
-        if objective is not None and objective not in OBJECTIVES:
+        if objective not in OBJECTIVES:
             raise ValueError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
-        self.objective = objective or default_objective(solver)
+        self.objective = objective
         self.handover = handover
         self.transient = transient
         self.start_relief = start_relief
