@@ -12,7 +12,8 @@ same path in the same run (median and worst). Results: bench/results/lp_quality.
     nice -n 10 .venv/bin/python bench/lp_quality.py --only dome,hel-R50,corners,tube1450 \\
         --combos default,passes2,tl-p2-env0.85 --modes lp,engine
 
-"grid" in a combination is not an LPPlanner argument: it scales `default_grid_step`.
+"grid" in a combination is not an LPPlanner argument: it scales `default_grid_step`;
+"highs" sets `HighsBackend` class attributes (CARRY, SCALE_STRATEGY) for the combination.
 """
 
 from __future__ import annotations
@@ -57,6 +58,12 @@ COMBOS: dict[str, dict[str, Any]] = {
     "tl-p2": {"objective": "time-late", "max_passes": 2},
     #: the recommendation of the 2026-12-02 run (0 failures on 14 + 41 corpus paths)
     "tl-p2-env0.85": {"objective": "time-late", "max_passes": 2, "envelope_jerk": 0.85},
+    #: HighsBackend class settings ("highs" is not an LPPlanner argument, see lp_setting)
+    "no-carry": {"highs": {"CARRY": False}},  # each window's first LP cold (before stop 42)
+    "scale0": {"highs": {"SCALE_STRATEGY": 0}},
+    "scale4": {"highs": {"SCALE_STRATEGY": 4}},
+    "tol9": {"highs": {"PRIMAL_TOLERANCE": 1e-9}},
+    "no-carry-tol9": {"highs": {"CARRY": False, "PRIMAL_TOLERANCE": 1e-9}},
 }
 
 
@@ -77,14 +84,18 @@ def reference_times() -> dict[str, float]:
 @contextlib.contextmanager
 def lp_setting(combo: dict[str, Any]):
     """While active, `LPPlanner(...)` as imported by corpus_bench builds the combination's
-    planner, and `default_grid_step` is scaled by combo["grid"]."""
+    planner, `default_grid_step` is scaled by combo["grid"] and `HighsBackend`'s class
+    attributes are combo["highs"]."""
     import lookahead.planning.lp as lp_pkg
     from lookahead.planning.lp import planner as planner_mod
+    from lookahead.planning.lp.solve import HighsBackend
 
     kwargs = {k: (tuple(v) if isinstance(v, list) else v) for k, v in combo.items()
-              if k != "grid"}
+              if k not in ("grid", "highs")}
     base_cls, base_step = planner_mod.LPPlanner, planner_mod.default_grid_step
     scale = float(combo.get("grid", 1.0))
+    backend = combo.get("highs", {})
+    saved = {k: getattr(HighsBackend, k) for k in backend}
 
     def factory(**kw):
         return base_cls(**{**kw, **kwargs})
@@ -94,11 +105,15 @@ def lp_setting(combo: dict[str, Any]):
 
     lp_pkg.LPPlanner = factory  # the package's lazy export is looked up first
     planner_mod.default_grid_step = step
+    for k, v in backend.items():
+        setattr(HighsBackend, k, v)
     try:
         yield
     finally:
         del lp_pkg.LPPlanner
         planner_mod.default_grid_step = base_step
+        for k, v in saved.items():
+            setattr(HighsBackend, k, v)
 
 
 def run_one(p, mode: str, combo: dict[str, Any], timeout: float) -> dict:

@@ -665,8 +665,12 @@ class LPPlanner:
         return PlanResult(slice_profile(full, seam.t_cut), self.name, 0.0, info)
 
     def forget(self) -> None:
-        """Drop the last plan (the next request is planned from scratch)."""
+        """Drop the last plan and the solver's carried bases (the next request is planned
+        from scratch, whatever was planned before)."""
         self._last = None
+        forget = getattr(self.backend, "forget", None)
+        if callable(forget):
+            forget()
 
     def find_seam(self, request: PlanRequest) -> Seam | None:
         """The seam with the last plan if the request starts on it (`seam.find_seam`)."""

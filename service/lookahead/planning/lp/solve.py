@@ -14,10 +14,13 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from lookahead.planning.lp.basis_carry import CarriedBasis, map_basis
 from lookahead.planning.lp.osqp_lift import Lifted, column_range, lift_rows
 from lookahead.planning.lp.rows import Rows
 
 SOLVERS = ("osqp", "highs", "highs-milp")
+#: HiGHS's default `primal_feasibility_tolerance` (restored for small LPs)
+HIGHS_PRIMAL_TOLERANCE = 1e-7
 #: OSQP statuses that certify infeasibility (primal, primal inaccurate): no retry
 _INFEASIBLE = (3, 4)
 #: ADMM iterations between rho updates (fixed: reproducible answers; 25 is OSQP's check
@@ -558,7 +561,20 @@ class HighsBackend:
     LPs of n-butterfly's whole job: 15700 -> 12800 simplex iterations). (The
     velocity+acceleration pass's basis with the jerk rows' slacks basic, for the first
     jerk pass, saved ~10 % of the iterations and changed two objectives by > 1e-6: not
-    used.)"""
+    used.)
+
+    A new window's first LP of a kind (rows per column: the velocity+acceleration pass,
+    the jerk passes) of `CARRY_MIN_COLUMNS` columns or more starts from the last optimal
+    basis of that kind, mapped onto its columns and rows by node position s
+    (`basis_carry`, `CARRY`): ~3,000-6,600 dual simplex iterations cold on a fiberpath
+    window, ~1,000-3,800 carried. `forget` drops
+    the carried bases (a new job plans as from scratch). A problem of the loaded one's
+    shape on other nodes is another window: it takes the carry, not the basis by index.
+    Measured side by side on the 64 non-long corpus paths (bench/results/
+    lp_quality_carry_*.json, at the primal tolerance 1e-7): engine compute summed 193.8 ->
+    170.7 s, cam-fp-hel45-D60 21.2 -> 14.3 s; see `PRIMAL_TOLERANCE` for what it changed.
+    (`simplex_scale_strategy` 4 in the same run: whole-job lp 271 -> 216 s, but one
+    engine job +22.5 %, w-layers-R100-hel45-hoop-hel20: not used.)"""
 
     #: shapes (columns, rows) whose last optimal basis is kept for a later start; off (0):
     #: measured at the stop of this round, it made plans depend on what the backend solved
@@ -573,11 +589,42 @@ class HighsBackend:
     #: c-corners-bspline-2d 1.75 s -> 1.56 s; same statuses and objectives to 1e-6)
     EDGE_WEIGHTS = 1
 
+    #: HiGHS's `simplex_scale_strategy`, None for its default (A/B in bench/lp_quality.py)
+    SCALE_STRATEGY: int | None = None
+    #: HiGHS's `primal_feasibility_tolerance` on LPs of `CARRY_MIN_COLUMNS` columns or more
+    #: (its default 1e-7 below; None keeps the default everywhere). The jerk
+    #: rows of nodes near rest have bounds ~1e-6 in `ScaledLP` units, so 1e-7 let a
+    #: solution use a tenth of such a bound beyond it, and optima of equal objective to
+    #: 1e-5 differed there: a start basis carried from another window gave three nodes
+    #: at q = 0 where a cold start gave 3e-5 q_max (w-layers-R40-hel65-hel25-0p5mm's second
+    #: window; its engine job +3.5 %). Measured side by side on the 64 non-long corpus
+    #: paths (bench/results/lp_quality_tol_*.json, against 1e-7 without the carry): 0
+    #: failures; winding median 0, whole-job lp -13 % on cam-fp-layers (110.4 -> 96.1 s),
+    #: worst +0.67 % (cam-fp-hel45-D60's engine); compute summed 261 -> 233 s (lp), 195 ->
+    #: 189 s (engine: the carry alone 173 s, but with the +3.5 %)
+    PRIMAL_TOLERANCE: float | None = 1e-9
+    #: start a new window's first LP of a kind from the last optimal basis of that kind
+    #: (`basis_carry`), mapped by node position and row key, instead of from scratch
+    CARRY = True
+    #: the carry and `PRIMAL_TOLERANCE` apply to LPs of at least this many columns: below,
+    #: a cold solve takes a few ms and each changed the plans more than it saved (the
+    #: three-drive winder's programs, windows of 90-180 nodes: the 100k-line program
+    #: streamed 41.6x real time without either, 35.3x with the carry, 32.9x with both,
+    #: 35.3x with the tolerance alone; cam-feed-w3-F20000-L500's engine 4.4 -> 5.3 s with
+    #: the carry). Fiberpath windows have 800-1,600 nodes.
+    CARRY_MIN_COLUMNS = 400
+
     def __init__(self) -> None:
         self._highs = None
         self._matrix: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._nodes: np.ndarray | None = None  # the loaded problem's
+        self._tolerance = HIGHS_PRIMAL_TOLERANCE  # the model's primal tolerance now
         self._bases: dict[tuple[int, int], object] = {}
+        #: per kind of LP (rows per column, rounded): the last optimal solve's basis, its
+        #: nodes and its matrix, converted to a `CarriedBasis` only when one is used
+        self._carried: dict[int, tuple[object, np.ndarray, sp.csr_matrix]] = {}
         self.warm_solves = 0
+        self.carried_solves = 0
 
     def _new(self):
         import highspy
@@ -588,6 +635,10 @@ class HighsBackend:
         h.setOptionValue("output_flag", False)
         h.setOptionValue("presolve", "off")
         h.setOptionValue("simplex_dual_edge_weight_strategy", self.EDGE_WEIGHTS)
+        h.setOptionValue("primal_feasibility_tolerance", HIGHS_PRIMAL_TOLERANCE)
+        self._tolerance = HIGHS_PRIMAL_TOLERANCE
+        if self.SCALE_STRATEGY is not None:
+            h.setOptionValue("simplex_scale_strategy", self.SCALE_STRATEGY)
         return h
 
     def solve(self, lp: ScaledLP, z0: np.ndarray | None = None) -> LPOutcome:
@@ -602,12 +653,19 @@ class HighsBackend:
         row_lo = np.where(np.isfinite(lp.row_lower), lp.row_lower, -inf)
         row_hi = np.where(np.isfinite(lp.row_upper), lp.row_upper, inf)
         last = self._matrix
+        # a problem of the last one's shape on other nodes is another window: its basis
+        # by index would mean other places on the path (the carry maps them by node)
         same_shape = (last is not None and h.getNumCol() == n and h.getNumRow() == m
-                      and last[0].size == A.indptr.size)
+                      and last[0].size == A.indptr.size
+                      and _same_nodes(self._nodes, lp.nodes))
         same = (same_shape and np.array_equal(last[0], A.indptr)
                 and np.array_equal(last[1], A.indices) and np.array_equal(last[2], A.data))
-        # the loaded problem's basis, else the last of one of this shape (`MEMORY`)
+        # the loaded problem's basis, else the last of one of this shape (`MEMORY`), else
+        # one carried from the last window (`CARRY`)
         basis = h.getBasis() if same_shape and h.getBasis().valid else self._bases.get((n, m))
+        if basis is None and not same:
+            basis = self._carry(lp)
+            self.carried_solves += basis is not None
         warm = basis is not None
         if same:
             cols = np.arange(n, dtype=np.int32)
@@ -619,6 +677,12 @@ class HighsBackend:
             if basis is not None:
                 h.setBasis(basis)
         self._matrix = (A.indptr.copy(), A.indices.copy(), A.data.copy())
+        self._nodes = lp.nodes
+        tolerance = (self.PRIMAL_TOLERANCE if self.PRIMAL_TOLERANCE is not None
+                     and n >= self.CARRY_MIN_COLUMNS else HIGHS_PRIMAL_TOLERANCE)
+        if tolerance != self._tolerance:
+            h.setOptionValue("primal_feasibility_tolerance", tolerance)
+            self._tolerance = tolerance
         h.run()
         status = h.getModelStatus()
         done = (highspy.HighsModelStatus.kOptimal, highspy.HighsModelStatus.kInfeasible)
@@ -633,6 +697,8 @@ class HighsBackend:
             z = np.clip(np.asarray(h.getSolution().col_value, dtype=float), lp.lower, lp.upper)
             self._bases.pop((n, m), None)
             self._bases[(n, m)] = h.getBasis()
+            if self.CARRY and lp.nodes is not None and lp.nodes.size == n:
+                self._carried[_kind(n, m)] = (self._bases[(n, m)], lp.nodes, lp.A)
             while len(self._bases) > self.MEMORY:
                 self._bases.pop(next(iter(self._bases)))
         else:
@@ -644,6 +710,38 @@ class HighsBackend:
         iterations = int(h.getInfo().simplex_iteration_count)
         return LPOutcome(z * lp.q_scale, ok, f"highs: {h.modelStatusToString(status)}",
                          iterations)
+
+    def forget(self) -> None:
+        """Drop the carried bases: the next window starts cold, as the job's first does
+        (`LPPlanner.forget`: a new job, an override, a cancelled replan)."""
+        self._carried.clear()
+
+    def _carry(self, lp: ScaledLP):
+        """An alien HiGHS basis for `lp` mapped from the last optimal solve of its kind,
+        or None (no such solve, no nodes, too few rows in common)."""
+        import highspy
+
+        n, m = lp.cost.size, lp.A.shape[0]
+        last = (self._carried.get(_kind(n, m)) if self.CARRY and n >= self.CARRY_MIN_COLUMNS
+                else None)
+        if last is None or lp.nodes is None or lp.nodes.size != n:
+            return None
+        basis, nodes, A = last
+        carried = CarriedBasis(nodes, row_keys(sp.csr_matrix(A), nodes),
+                               np.array([b.value for b in basis.col_status]),
+                               np.array([b.value for b in basis.row_status]))
+        codes = highspy.HighsBasisStatus
+        mapped = map_basis(carried, lp.nodes, row_keys(sp.csr_matrix(lp.A), lp.nodes),
+                           int(codes.kLower.value), int(codes.kBasic.value))
+        if mapped is None:
+            return None
+        table = {int(b.value): b for b in (codes.kLower, codes.kBasic, codes.kUpper,
+                                           codes.kZero, codes.kNonbasic)}
+        out = highspy.HighsBasis()
+        out.col_status = [table[c] for c in mapped[0].tolist()]
+        out.row_status = [table[c] for c in mapped[1].tolist()]
+        out.valid, out.alien = True, True
+        return out
 
     @staticmethod
     def _pass(h, lp: ScaledLP, A: sp.csc_matrix, row_lo: np.ndarray, row_hi: np.ndarray
@@ -659,6 +757,19 @@ class HighsBackend:
         model.a_matrix_.index_ = A.indices
         model.a_matrix_.value_ = A.data
         h.passModel(model)
+
+
+def _same_nodes(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    """Whether two LPs' node arrays name the same places (both unknown counts as same)."""
+    if a is None or b is None:
+        return a is None and b is None
+    return a is b or np.array_equal(a, b, equal_nan=True)
+
+
+def _kind(n: int, m: int) -> int:
+    """An LP's kind for `HighsBackend`'s carried bases: rows per column, rounded (the
+    velocity+acceleration pass ~2, the jerk passes ~9-11)."""
+    return round(m / max(n, 1))
 
 
 def highspy_available() -> bool:
