@@ -567,9 +567,9 @@ class HighsBackend:
     the jerk passes) of `CARRY_MIN_COLUMNS` columns or more starts from the last optimal
     basis of that kind, mapped onto its columns and rows by node position s
     (`basis_carry`, `CARRY`): ~3,000-6,600 dual simplex iterations cold on a fiberpath
-    window, ~1,000-3,800 carried. `forget` drops
-    the carried bases (a new job plans as from scratch). A problem of the loaded one's
-    shape on other nodes is another window: it takes the carry, not the basis by index.
+    window, ~1,000-3,800 carried. `forget` drops the carried bases (a new job plans as
+    from scratch). A problem of that size and of the loaded one's shape on other nodes is
+    another window: it takes the carry, not the basis by index.
     Measured side by side on the 64 non-long corpus paths (bench/results/
     lp_quality_carry_*.json, at the primal tolerance 1e-7): engine compute summed 193.8 ->
     170.7 s, cam-fp-hel45-D60 21.2 -> 14.3 s; see `PRIMAL_TOLERANCE` for what it changed.
@@ -606,12 +606,13 @@ class HighsBackend:
     #: start a new window's first LP of a kind from the last optimal basis of that kind
     #: (`basis_carry`), mapped by node position and row key, instead of from scratch
     CARRY = True
-    #: the carry and `PRIMAL_TOLERANCE` apply to LPs of at least this many columns: below,
-    #: a cold solve takes a few ms and each changed the plans more than it saved (the
-    #: three-drive winder's programs, windows of 90-180 nodes: the 100k-line program
-    #: streamed 41.6x real time without either, 35.3x with the carry, 32.9x with both,
-    #: 35.3x with the tolerance alone; cam-feed-w3-F20000-L500's engine 4.4 -> 5.3 s with
-    #: the carry). Fiberpath windows have 800-1,600 nodes.
+    #: the carry and `PRIMAL_TOLERANCE` apply to LPs of at least this many columns; smaller
+    #: ones solve as at stop 41. There a cold solve takes a few ms, the mapping costs
+    #: ~0.5 ms, and the carry changed plans more than it saved: cam-feed-w3-F20000-L500
+    #: (three-drive winder, windows of 90-180 nodes), engine 4.4 -> 5.3 s side by side;
+    #: the 100k-line program of that machine streamed 41.6x real time without either,
+    #: 35.3x with the carry, 32.9x with both (single runs, on a machine whose noise is
+    #: ~15 %). Fiberpath windows have 800-1,600 nodes.
     CARRY_MIN_COLUMNS = 400
 
     def __init__(self) -> None:
@@ -653,11 +654,12 @@ class HighsBackend:
         row_lo = np.where(np.isfinite(lp.row_lower), lp.row_lower, -inf)
         row_hi = np.where(np.isfinite(lp.row_upper), lp.row_upper, inf)
         last = self._matrix
-        # a problem of the last one's shape on other nodes is another window: its basis
-        # by index would mean other places on the path (the carry maps them by node)
+        # a large problem of the last one's shape on other nodes is another window: its
+        # basis by index would mean other places on the path (the carry maps them by node)
+        large = self.CARRY and n >= self.CARRY_MIN_COLUMNS
         same_shape = (last is not None and h.getNumCol() == n and h.getNumRow() == m
                       and last[0].size == A.indptr.size
-                      and _same_nodes(self._nodes, lp.nodes))
+                      and (not large or _same_nodes(self._nodes, lp.nodes)))
         same = (same_shape and np.array_equal(last[0], A.indptr)
                 and np.array_equal(last[1], A.indices) and np.array_equal(last[2], A.data))
         # the loaded problem's basis, else the last of one of this shape (`MEMORY`), else
@@ -722,8 +724,8 @@ class HighsBackend:
         import highspy
 
         n, m = lp.cost.size, lp.A.shape[0]
-        last = (self._carried.get(_kind(n, m)) if self.CARRY and n >= self.CARRY_MIN_COLUMNS
-                else None)
+        large = self.CARRY and n >= self.CARRY_MIN_COLUMNS
+        last = self._carried.get(_kind(n, m)) if large else None
         if last is None or lp.nodes is None or lp.nodes.size != n:
             return None
         basis, nodes, A = last
