@@ -13,7 +13,8 @@ same path in the same run (median and worst). Results: bench/results/lp_quality.
         --combos default,passes2,tl-p2-env0.85 --modes lp,engine
 
 "grid" in a combination is not an LPPlanner argument: it scales `default_grid_step`;
-"highs" sets `HighsBackend` class attributes (CARRY, SCALE_STRATEGY) for the combination.
+"highs" sets `HighsBackend` class attributes (CARRY, PRIMAL_TOLERANCE, SCALE_STRATEGY) for
+the combination.
 """
 
 from __future__ import annotations
@@ -59,11 +60,13 @@ COMBOS: dict[str, dict[str, Any]] = {
     #: the recommendation of the 2026-12-02 run (0 failures on 14 + 41 corpus paths)
     "tl-p2-env0.85": {"objective": "time-late", "max_passes": 2, "envelope_jerk": 0.85},
     #: HighsBackend class settings ("highs" is not an LPPlanner argument, see lp_setting)
-    "no-carry": {"highs": {"CARRY": False}},  # each window's first LP cold (before stop 42)
+    #: (results files store each combination's dict, not the defaults it ran against:
+    #: lp_quality_carry_* and lp_quality_tol_* ran at the tolerance 1e-7 by default)
+    "no-carry": {"highs": {"CARRY": False}},  # each window's first LP cold
+    "tol7": {"highs": {"PRIMAL_TOLERANCE": None}},  # HiGHS's default primal tolerance
+    "stop41-highs": {"highs": {"CARRY": False, "PRIMAL_TOLERANCE": None}},
     "scale0": {"highs": {"SCALE_STRATEGY": 0}},
     "scale4": {"highs": {"SCALE_STRATEGY": 4}},
-    "tol9": {"highs": {"PRIMAL_TOLERANCE": 1e-9}},
-    "no-carry-tol9": {"highs": {"CARRY": False, "PRIMAL_TOLERANCE": 1e-9}},
 }
 
 
