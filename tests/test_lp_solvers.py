@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from lookahead.planning.lp.basis_carry import match_rows
 from lookahead.planning.lp.osqp_lift import lift_rows
 from lookahead.planning.lp.rows import (
     GridGeometry,
@@ -26,7 +27,6 @@ from lookahead.planning.lp.solve import (
     MilpBackend,
     OsqpBackend,
     ScaledLP,
-    _match,
     _pull_inside,
     _worst_excess,
     bound_normalized_rows,
@@ -98,7 +98,7 @@ def test_row_keys_name_the_same_rows_in_a_shifted_window():
     old = feed_lp(60, 1, nodes=s)
     new = feed_lp(60, 1, nodes=s + 10.0)
     k_old, k_new = row_keys(old.A, old.nodes), row_keys(new.A, new.nodes)
-    i_new, i_old = _match(k_new, k_old)
+    i_new, i_old = match_rows(k_new, k_old)
     assert i_new.size > 0
     # matched rows start on the same node s and have as many entries
     first = lambda A, r: A.indices[A.indptr[r]]  # noqa: E731

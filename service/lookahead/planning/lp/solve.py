@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from lookahead.planning.lp.basis_carry import CarriedBasis, map_basis
+from lookahead.planning.lp.basis_carry import CarriedBasis, map_basis, match_rows
 from lookahead.planning.lp.osqp_lift import Lifted, column_range, lift_rows
 from lookahead.planning.lp.rows import Rows
 
@@ -140,18 +140,6 @@ def row_keys(A: sp.csr_matrix, nodes: np.ndarray) -> np.ndarray:
     run = np.repeat(starts, np.diff(np.r_[starts, m]))
     rank[order] = np.arange(m) - run
     return np.stack([nodes[first] if nodes.size else np.zeros(m), rank, counts], axis=1)
-
-
-def _match(keys_new: np.ndarray, keys_old: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Indices (new, old) of the rows of `keys_new` that also occur in `keys_old`."""
-    if keys_new.size == 0 or keys_old.size == 0:
-        return np.empty(0, dtype=int), np.empty(0, dtype=int)
-    old = {tuple(k): i for i, k in enumerate(keys_old.tolist())}
-    pairs = [(i, old[k]) for i, k in enumerate(map(tuple, keys_new.tolist())) if k in old]
-    if not pairs:
-        return np.empty(0, dtype=int), np.empty(0, dtype=int)
-    idx = np.array(pairs, dtype=int)
-    return idx[:, 0], idx[:, 1]
 
 
 @dataclass
@@ -465,7 +453,7 @@ class OsqpBackend:
         y_b[hit] = mem.y_bounds[j[hit]]
         x = np.clip(x, lp.lower, lp.upper)
         y_r = np.zeros(keys.shape[0])
-        new, old = _match(keys, mem.keys)
+        new, old = match_rows(keys, mem.keys)
         y_r[new] = mem.y_rows[old]
         solver.warm_start(x=extend(x), y=np.concatenate([y_b, y_r, chain]))
 
@@ -656,10 +644,9 @@ class HighsBackend:
         last = self._matrix
         # a large problem of the last one's shape on other nodes is another window: its
         # basis by index would mean other places on the path (the carry maps them by node)
-        large = self.CARRY and n >= self.CARRY_MIN_COLUMNS
         same_shape = (last is not None and h.getNumCol() == n and h.getNumRow() == m
                       and last[0].size == A.indptr.size
-                      and (not large or _same_nodes(self._nodes, lp.nodes)))
+                      and (not self._carries(n) or _same_nodes(self._nodes, lp.nodes)))
         same = (same_shape and np.array_equal(last[0], A.indptr)
                 and np.array_equal(last[1], A.indices) and np.array_equal(last[2], A.data))
         # the loaded problem's basis, else the last of one of this shape (`MEMORY`), else
@@ -718,14 +705,17 @@ class HighsBackend:
         (`LPPlanner.forget`: a new job, an override, a cancelled replan)."""
         self._carried.clear()
 
+    def _carries(self, n: int) -> bool:
+        """Whether an LP of n columns is started from a carried basis (`CARRY_MIN_COLUMNS`)."""
+        return self.CARRY and n >= self.CARRY_MIN_COLUMNS
+
     def _carry(self, lp: ScaledLP):
         """An alien HiGHS basis for `lp` mapped from the last optimal solve of its kind,
         or None (no such solve, no nodes, too few rows in common)."""
         import highspy
 
         n, m = lp.cost.size, lp.A.shape[0]
-        large = self.CARRY and n >= self.CARRY_MIN_COLUMNS
-        last = self._carried.get(_kind(n, m)) if large else None
+        last = self._carried.get(_kind(n, m)) if self._carries(n) else None
         if last is None or lp.nodes is None or lp.nodes.size != n:
             return None
         basis, nodes, A = last
