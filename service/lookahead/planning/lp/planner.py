@@ -824,7 +824,7 @@ class LPPlanner:
             trouble.append(s_bad)
             before = Tightening(tight.vel.copy(), tight.acc.copy(), tight.jerk.copy())
             self._tighten(tight, ratios, full, s, request.dt)
-            plan = solve(before=before, start_q=plan.q, passes=1)
+            plan = solve(before=before, start_q=plan.q, passes=1, q_star_head=q_star_head)
             repairs += 1
         a_end = 0.0  # at rest, or at v_end with path acceleration 0
         self._last = LastPlan(request, geo, plan.q, node_accelerations(s, plan.q, a_start, a_end),
