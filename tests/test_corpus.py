@@ -171,12 +171,12 @@ def test_corpus_bench_runs_end_to_end(tmp_path) -> None:
 
     out = tmp_path / "corpus.json"
     rc = corpus_bench.main(["--subset", "all", "--paths", "c-short-xy-0p5mm",
-                            "--methods", "heuristic,engine-lp,reference", "--workers", "1",
+                            "--methods", "heuristic,lp,engine-lp,reference", "--workers", "1",
                             "--out", str(out), "--no-plot", "--task-timeout", "120"])
     assert rc == 0
     doc = json.loads(out.read_text())
     entry = doc["paths"]["c-short-xy-0p5mm"]
-    assert set(entry["methods"]) == {"heuristic", "engine-lp", "reference"}
+    assert set(entry["methods"]) == {"heuristic", "lp", "engine-lp", "reference"}
     assert doc["meta"]["git"]["head"] and doc["meta"]["git"]["time_utc"]
     bound = entry["bound_s"]
     assert bound > 0
@@ -190,7 +190,14 @@ def test_corpus_bench_runs_end_to_end(tmp_path) -> None:
             assert row["ratio_best"] >= 1.0 - 1e-12
     engine = entry["methods"]["engine-lp"]
     assert {"fallbacks", "replan_failures", "replan_ms_p99", "x_realtime"} <= set(engine)
-    assert set(doc["summary"]) == {"heuristic", "engine-lp", "reference"}
+    # the windowed plan against the whole job in samples: (samples - 1) dt of each
+    whole = entry["methods"]["lp"]
+    dt = 0.001
+    assert whole["winding_s"] <= whole["winding_sampled_s"] < whole["winding_s"] + dt
+    assert engine["ratio_whole"] == engine["winding_s"] / whole["winding_sampled_s"]
+    assert "ratio_whole" not in whole
+    assert set(doc["summary"]) == {"heuristic", "lp", "engine-lp", "reference"}
+    assert doc["summary"]["engine-lp"]["ratio_whole"]["worst"] == engine["ratio_whole"]
 
 
 def test_reference_quintic_hermite_matches_values_slopes_and_curvatures() -> None:
