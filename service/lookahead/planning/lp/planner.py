@@ -240,12 +240,16 @@ RELINEARIZE_EXTRA = 2
 #: travel time (trades compute for time: on the fast corpus every pass for a smaller
 #: share gained < 0.1 % and tripled the replan p99 of c-corners-bspline-2d)
 RELINEARIZE_SHARE = 0.02
-#: ... on LPs of at most this many nodes: a pass of the ~10k-node whole-job LP of a CAM
-#: program costs 10-18 s of HiGHS (cam-fp-vonkarman whole job: 270 s against 7 s, 106.6 s
-#: of motion against 186.1 s); the service's windows have ~300-1000 nodes, the largest
-#: fast-corpus whole job 2215 (c-fourier-xc). Repairs get them too (without: c-corners
-#: +0.96 %, the butterfly 7.55 s against 6.74 s)
-RELINEARIZE_MAX_NODES = 4000
+#: ... on LPs of at most this many nodes (None: any size). Repairs get them too (without:
+#: c-corners +0.96 %, the butterfly 7.55 s against 6.74 s). Trades the whole-job LP's
+#: compute for its plan; the service's windows (300-1,600 nodes) never reached the old cap
+#: of 4000, set when a pass of a CAM program's ~10k-node whole job cost 10-18 s of HiGHS.
+#: Since the carried basis and the tighter tolerance (stop 42), measured on the corpus's
+#: 17 longest whole jobs (bench/results/lp_whole_relinearize.json): without a cap the
+#: fiberpath programs' plans are 3-21 % shorter (cam-fp-hel45-D60 59.18 -> 46.61 s, within
+#: 2.8 % of its windowed plan instead of 30.5 % above it) for 1.1-6.5x the CPU (hoop-hel45
+#: 7 -> 47 s), the other 10 unchanged to 0.1 %
+RELINEARIZE_MAX_NODES: int | None = None
 
 
 def pinned_share(s: np.ndarray, q: np.ndarray, pinned: np.ndarray) -> float:
@@ -1078,7 +1082,7 @@ class LPPlanner:
             # near 0 would climb by 3x per pass)
             q_star = np.where(pinned, np.sqrt(used * np.maximum(q, q_floor)), q)
             k += 1
-            extra = (geo.n_nodes <= RELINEARIZE_MAX_NODES
+            extra = ((RELINEARIZE_MAX_NODES is None or geo.n_nodes <= RELINEARIZE_MAX_NODES)
                      and pinned_share(geo.s, q, pinned) > RELINEARIZE_SHARE * t)
             if k >= n_passes + (RELINEARIZE_EXTRA if extra else 0):
                 break
