@@ -828,6 +828,9 @@ class LPPlanner:
             trouble.append(s_bad)
             before = Tightening(tight.vel.copy(), tight.acc.copy(), tight.jerk.copy())
             self._tighten(tight, ratios, full, s, request.dt)
+            # at a seam, q_star_head keeps the jerk-change rows on its first nodes as in
+            # the first solve (without: the nodal jerk zig-zagged there, round after
+            # round, until the LP was infeasible; tests/test_lp_seam_repairs.py)
             plan = solve(before=before, start_q=plan.q, passes=1, q_star_head=q_star_head)
             repairs += 1
         a_end = 0.0  # at rest, or at v_end with path acceleration 0
@@ -989,7 +992,9 @@ class LPPlanner:
         """Velocity+acceleration pass (unless start_q is given), then up to `passes`
         (default max_passes) jerk passes. start_envelope: bound q by the S-curve from the
         start state (not at a seam, whose first nodes are fixed). q_star_head: the jerk
-        rows' linearization point on the first nodes (a seam's last solution there)."""
+        rows' linearization point on the first nodes (a seam's last solution there; with
+        start_q, which then linearizes everywhere, it only says "at a seam": the
+        jerk-change rows on the first nodes stay, `seam_jerk_change`)."""
         lim = request.limits
         q_hi = np.minimum(self._caps(request, geo, tight),
                           self._envelope(request, geo, tight, stop_idx,
