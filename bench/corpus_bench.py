@@ -375,8 +375,9 @@ def usable(row: dict | None) -> bool:
         and not row.get("violations")
 
 
-#: the whole-job method a service engine's windowed plans are judged against
-WHOLE_JOB_OF = {"engine-lp": "lp", "engine-osqp": "lp", "engine-heuristic": "heuristic"}
+#: the whole-job method of the same planner a service engine's windowed plans are judged
+#: against (OSQP has no whole-job method here)
+WHOLE_JOB_OF = {"engine-lp": "lp", "engine-heuristic": "heuristic"}
 
 
 def finish_path(entry: dict) -> None:

@@ -48,16 +48,20 @@ def instrument(counts: dict[str, int]) -> None:
 
     backend.solve = counted_solve
     cls = lp_planner.LPPlanner
+    depth = [0]  # attempts call one another (half-frozen -> frozen): count the outer one
     for name in SEAM_ATTEMPTS:
         attempt = getattr(cls, name)
 
         def counted_attempt(self, *args, _attempt=attempt, **kwargs):
+            depth[0] += 1
             try:
                 result = _attempt(self, *args, **kwargs)
             except lp_planner.PlanningError:
-                counts["seam_failed"] += 1
+                counts["seam_failed"] += depth[0] == 1
                 raise
-            counts["seam_planned"] += 1
+            finally:
+                depth[0] -= 1
+            counts["seam_planned"] += depth[0] == 0
             return result
 
         setattr(cls, name, counted_attempt)
