@@ -11,10 +11,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lookahead.checker import LimitChecker
+from lookahead.checker import check_positions
 from lookahead.planning.base import PathState, PlanRequest
 from lookahead.planning.lp import LPPlanner
-from lookahead.sampling import sample_profile, sample_times
+from lookahead.sampling import sample_plan
 
 #: the engine's first window on this path, and where its first replan starts (path units)
 WINDOW_END = 1068.70
@@ -25,7 +25,7 @@ REPLAN_AT = 534.55
 def fiberpath_window():
     from bench.corpus import load_corpus
 
-    p = next(q for q in load_corpus("all", "cam-fp-hel45-D30*", True))
+    (p,) = load_corpus("all", "cam-fp-hel45-D30*", True)
     m = p.config.machine
     return p, p.path(), m.limits.scaled(p.config.planner.margin), m
 
@@ -48,7 +48,5 @@ def test_a_replan_on_the_last_plan_repairs_at_its_seam(fiberpath_window):
     assert replan.info["seam"] is not None
     assert replan.info["repairs"] > 0  # ... through repair rounds
     # ... and the plan passes the checker from the replan's state on
-    times = sample_times(replan.profile.duration, machine.dt)
-    checker = LimitChecker(machine.limits, machine.dt)
-    checker.feed(sample_profile(path, replan.profile, times).pos)
-    assert checker.report().violations == 0
+    smp = sample_plan(path, replan.profile, machine.dt)
+    assert check_positions(smp.pos, machine.limits, machine.dt).violations == 0
