@@ -305,7 +305,9 @@ def test_take_overs_avoid_the_plan_in_forces_hard_braking(monkeypatch) -> None:
     whole batch between half of `ahead_samples`' lead and all of it allows. On the
     feed-capped F20000 winding program with the LP, the plain take-overs (0.2 s before
     the plan's final braking) fell in its slowdown 107 times of 110; replans from braking
-    states were the LP's slowest and least robust."""
+    states were the LP's slowest and least robust. Since the LP's envelope into a window's
+    end follows the tangent there (stop 44, `lp.envelope.rest_envelope`) its braking is
+    shorter: 5 plain take-overs of 94 fall in it, 1 with the rule."""
     from bench.corpus import load_corpus
 
     import lookahead.stream.engine as engine_module
@@ -325,5 +327,5 @@ def test_take_overs_avoid_the_plan_in_forces_hard_braking(monkeypatch) -> None:
     count, hard = take_overs()
     assert count >= 50 and hard <= 2
     monkeypatch.setattr(engine_module, "TAKE_OVER_BRAKING_SHARE", float("inf"))
-    count, hard = take_overs()  # the rule off: no state counts as braking
-    assert count >= 50 and hard > count // 2
+    count_off, hard_off = take_overs()  # the rule off: no state counts as braking
+    assert count_off >= 50 and hard_off > hard

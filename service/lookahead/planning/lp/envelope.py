@@ -46,8 +46,9 @@ ENVELOPE_LIFT = 10.0
 def envelope_limits(tangents: np.ndarray, path_scale: np.ndarray, limits: AxisLimits
                     ) -> tuple[float, float]:
     """Path acceleration and jerk (path units / s^2, / s^3) for the LP's start/stop
-    envelopes over a window whose nodes have the tangents `tangents` (shape (n, naxes),
-    x'_k): `path_limits` (each axis may carry the whole tangent, |x'_k| <= 1 /
+    envelopes that do not follow a rest's own tangents (`rest_envelope`: moving starts and
+    ends, rests in bends) over a window whose nodes have the tangents `tangents` (shape
+    (n, naxes), x'_k): `path_limits` (each axis may carry the whole tangent, |x'_k| <= 1 /
     path_scale_k), unless the axes that barely move there (share below
     ENVELOPE_AXIS_SHARE), counted at their largest |x'_k| instead, lift a limit more than
     ENVELOPE_LIFT times. Why: a path whose small-limit axes barely move (c-rand6 in the raw
@@ -145,6 +146,23 @@ def rest_q(d: np.ndarray, J: np.ndarray, A: np.ndarray) -> np.ndarray:
     return np.where(d <= d1, (0.5 * J * t**2) ** 2, v1**2 + 2.0 * A * (d - d1))
 
 
+def _rest_bound(s: np.ndarray, centre: float, tangents: np.ndarray, limits: AxisLimits,
+                jerk_scale: np.ndarray, acc_scale: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """`local_rest_q`'s bound q per node and the path acceleration limit A it used there."""
+    d = np.abs(s - centre)
+    order = np.argsort(d, kind="stable")
+    xmax = np.maximum.accumulate(np.abs(tangents[order]), axis=0)
+    with np.errstate(divide="ignore"):
+        J = np.min(limits.jmax / xmax, axis=1) * np.minimum.accumulate(jerk_scale[order])
+        A = np.min(limits.amax / xmax, axis=1) * np.minimum.accumulate(acc_scale[order])
+    q = np.empty_like(d)
+    q[order] = rest_q(d[order], J, A)
+    a = np.empty_like(d)
+    a[order] = A
+    return q, a
+
+
 def local_rest_q(s: np.ndarray, centre: float, tangents: np.ndarray, limits: AxisLimits,
                  jerk_scale: np.ndarray, acc_scale: np.ndarray) -> np.ndarray:
     """The S-curve bound on q (path units^2 / s^2) at the nodes s around a rest at
@@ -155,12 +173,35 @@ def local_rest_q(s: np.ndarray, centre: float, tangents: np.ndarray, limits: Axi
     a rest only the tangent there matters (the curvature terms vanish with the feed), and
     the worst tangent of the whole path made the bound up to 2.6x too slow (a stroke's
     end, where only C moves: 51300 against 19600 mm/s^3)."""
-    d = np.abs(s - centre)
-    order = np.argsort(d, kind="stable")
-    xmax = np.maximum.accumulate(np.abs(tangents[order]), axis=0)
-    with np.errstate(divide="ignore"):
-        J = np.min(limits.jmax / xmax, axis=1) * np.minimum.accumulate(jerk_scale[order])
-        A = np.min(limits.amax / xmax, axis=1) * np.minimum.accumulate(acc_scale[order])
-    q = np.empty_like(d)
-    q[order] = rest_q(d[order], J, A)
+    return _rest_bound(s, centre, tangents, limits, jerk_scale, acc_scale)[0]
+
+
+#: `rest_envelope`: the share of an axis's acceleration and jerk limits that the curvature
+#: terms may take at the local bound's feeds for the tangent alone to bound the motion
+#: near a rest. Trades the envelopes' speed on straight approaches against bends near a
+#: rest, where the tangent-only bound lets the coupling 3 |x_ss| v a and |x_sss| v^3 take
+#: the jerk over its limit (the lock of a fiberpath-style turnaround, X reversing within
+#: 2 mm of path while A goes on: repairs stuck at +32 % jerk); measured on the 64
+#: non-long corpus paths (bench/results/corpus_rest_envelopes.json)
+REST_CURVATURE_SHARE = 0.1
+
+
+def rest_envelope(s: np.ndarray, centre: float, d1: np.ndarray, d2: np.ndarray,
+                  d3: np.ndarray, limits: AxisLimits, jerk_scale: np.ndarray,
+                  acc_scale: np.ndarray, q_top: float) -> np.ndarray | None:
+    """`local_rest_q` around a rest at `centre` where the tangent bounds the motion there:
+    at the bound's own feeds v (nodes where q < q_top, the highest q that matters), the
+    curvature terms |x_ss| v^2 and |x_sss| v^3 + 3 |x_ss| v A (A: the bound's path
+    acceleration) take at most REST_CURVATURE_SHARE of every axis's amax and jmax. None
+    where they take more (a bend near the rest): the caller keeps the conservative
+    envelope (`path_limits` / `envelope_limits`), which leaves them room."""
+    q, a = _rest_bound(s, centre, d1, limits, jerk_scale, acc_scale)
+    near = q < q_top
+    if np.any(near):
+        v = np.sqrt(q[near])[:, None]
+        x2, x3 = np.abs(d2[near]), np.abs(d3[near])
+        acc = np.max(x2 * v**2 / limits.amax)
+        jerk = np.max((x3 * v**3 + 3.0 * x2 * v * a[near][:, None]) / limits.jmax)
+        if max(acc, jerk) > REST_CURVATURE_SHARE:
+            return None
     return q

@@ -87,6 +87,7 @@ from lookahead.planning.lp.envelope import (
     local_rest_q,
     path_limits,
     reachable_q,
+    rest_envelope,
     tangent_limits,
 )
 from lookahead.planning.lp.grid import (
@@ -1259,21 +1260,33 @@ class LPPlanner:
     def _envelope(self, request: PlanRequest, geo: GridGeometry, tight: Tightening,
                   stop_idx: np.ndarray, include_start: bool = True) -> np.ndarray:
         """Jerk-limited S-curve bounds on q after the start (unless not `include_start`),
-        before a rest end and around interior stops (`lp.envelope`)."""
+        before a rest end and around interior stops (`lp.envelope`). Around a rest (a
+        start at rest, a rest end, the stops) at the tangents there where they bound the
+        motion (`lp.envelope.rest_envelope`: a C-dominated stroke of the winder started
+        at X's 2000 mm/s^2 where its axes allow 5244); from a moving start, into a moving
+        end and around a rest in a bend at `envelope_limits`."""
         A, J = envelope_limits(geo.d1, request.path.path_scale, request.limits)
         s = geo.s
+        q_top = float(np.max(velocity_caps(geo, request.limits.vmax)))
         # one S-curve per prescribed state, with the tightest factors of its reach
-        reach = braking_distance(float(np.sqrt(np.max(velocity_caps(geo, request.limits.vmax)))),
-                                 A, J)
+        reach = braking_distance(float(np.sqrt(q_top)), A, J)
 
         def factors(centre: float) -> tuple[float, float]:
             near = np.abs(s - centre) <= reach
             return (self.envelope_jerk * J * float(np.min(tight.jerk[near])),
                     A * float(np.min(tight.acc[near])))
 
+        def rest(centre: float) -> np.ndarray:
+            local = rest_envelope(s, centre, geo.d1, geo.d2, geo.d3, request.limits,
+                                  self.envelope_jerk * tight.jerk, tight.acc, q_top)
+            return local if local is not None else reachable_q(np.abs(s - centre), 0.0,
+                                                               0.0, *factors(centre))
+
         a0 = request.start.a
         env = np.full(s.size, np.inf)
-        if include_start:
+        if include_start and request.start.v <= REST and a0 == 0.0:
+            env = rest(s[0])
+        elif include_start:
             Jn, An = factors(s[0])
             if a0 < 0.0 and request.start.v > REST:
                 # a braking start: an envelope that releases the braking more slowly than
@@ -1283,9 +1296,13 @@ class LPPlanner:
                 Jn = max(Jn, a0 * a0 / request.start.v)
             env = reachable_q(s - s[0], request.start.v, a0, Jn, max(An, a0 + 1e-6 * abs(a0)))
         # the way into the end state (rest, or v_end with path acceleration 0) backwards
-        env = np.minimum(env, reachable_q(s[-1] - s, request.v_end, 0.0, *factors(s[-1])))
+        if request.v_end > REST:
+            env = np.minimum(env, reachable_q(s[-1] - s, request.v_end, 0.0,
+                                              *factors(s[-1])))
+        else:
+            env = np.minimum(env, rest(s[-1]))
         for i in stop_idx:
-            env = np.minimum(env, reachable_q(np.abs(s - s[i]), 0.0, 0.0, *factors(s[i])))
+            env = np.minimum(env, rest(s[i]))
         return env
 
     def _rest_caps(self, request: PlanRequest, geo: GridGeometry, tight: Tightening,
