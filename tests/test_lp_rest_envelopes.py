@@ -49,3 +49,36 @@ def test_a_stroke_along_c_accelerates_at_its_own_tangents_limits(solver: str) ->
     # 5.950 s against 5.442 (1.093x)
     best = rest_to_rest_duration(np.array([300.0, 3600.0]), limits)
     assert result.profile.duration < 1.05 * best
+
+
+def test_a_rest_in_a_bend_keeps_the_conservative_envelope() -> None:
+    """`rest_envelope` follows the tangent where the curvature terms at its feeds stay
+    small (a straight stroke), and gives way (None) where they do not (a rest on a circle
+    of 30 mm, whose centripetal term reaches amax at 212 mm/s)."""
+    from lookahead.limits import AxisLimits
+    from lookahead.planning.lp.envelope import REST_CURVATURE_SHARE, local_rest_q, rest_envelope
+    from lookahead.planning.lp.rows import GridGeometry
+
+    lim = AxisLimits(vmax=np.array([150.0, 150.0]), amax=np.array([1500.0, 1500.0]),
+                     jmax=np.array([20000.0, 20000.0]))
+    ones = np.ones(2)
+    line = fit_points(np.column_stack([np.linspace(0, 100, 21), np.linspace(0, 30, 21)]),
+                      ones, "cubic")
+    theta = np.linspace(0.0, np.pi, 61)
+    arc = fit_points(30.0 * np.column_stack([np.cos(theta), np.sin(theta)]), ones, "cubic")
+    for path, straight in ((line, True), (arc, False)):
+        geo = GridGeometry.sample(path, np.linspace(0.0, path.length, 201))
+        scale = np.full(geo.s.size, 0.9)
+        q_top = float(np.max(lim.vmax)) ** 2
+        env = rest_envelope(geo.s, 0.0, geo.d1, geo.d2, geo.d3, lim, scale, scale, q_top)
+        if straight:
+            assert env is not None
+            assert env == pytest.approx(local_rest_q(geo.s, 0.0, geo.d1, lim, scale, scale))
+        else:
+            assert env is None
+            # the coupling 3 |x_ss| v A (A <= 1500 here) takes the share at v >= 0.1 jmax
+            # R / (3 * 1500): a bound that stops below it follows the tangent on the circle
+            v = REST_CURVATURE_SHARE * 20000.0 * 30.0 / (3.0 * 1500.0)
+            near = rest_envelope(geo.s, 0.0, geo.d1, geo.d2, geo.d3, lim, scale, scale,
+                                 (0.5 * v) ** 2)
+            assert near is not None

@@ -181,8 +181,11 @@ def local_rest_q(s: np.ndarray, centre: float, tangents: np.ndarray, limits: Axi
 #: near a rest. Trades the envelopes' speed on straight approaches against bends near a
 #: rest, where the tangent-only bound lets the coupling 3 |x_ss| v a and |x_sss| v^3 take
 #: the jerk over its limit (the lock of a fiberpath-style turnaround, X reversing within
-#: 2 mm of path while A goes on: repairs stuck at +32 % jerk); measured on the 64
-#: non-long corpus paths (bench/results/corpus_rest_envelopes.json)
+#: 2 mm of path while A goes on: repairs stuck at +32 % jerk without the rule, planned at
+#: 0.1, 0.25 and 0.5). At 0.1 on the 64 non-long corpus paths: lp 27 faster, 2 slower
+#: (bench/results/corpus_rest_envelopes.json against ..._before.json); 0.03 and 0.25
+#: plan the fast subset as 0.1 does to 0.61 % (1-3 paths of 16 differ,
+#: corpus_rest_share_0p03.json, corpus_rest_share_0p25.json)
 REST_CURVATURE_SHARE = 0.1
 
 
