@@ -74,6 +74,12 @@ def test_a_rest_in_a_bend_keeps_the_conservative_envelope() -> None:
         if straight:
             assert env is not None
             assert env == pytest.approx(local_rest_q(geo.s, 0.0, geo.d1, lim, scale, scale))
+            # an undefined tangent (a pchip knot where the fit stops in every axis) makes
+            # the bound NaN beyond it: the conservative envelope, never NaN bounds
+            d1 = geo.d1.copy()
+            d1[100] = np.nan
+            assert rest_envelope(geo.s, 0.0, d1, geo.d2, geo.d3, lim, scale, scale,
+                                 q_top) is None
         else:
             assert env is None
             # the coupling 3 |x_ss| v A (A <= 1500 here) takes the share at v >= 0.1 jmax

@@ -197,8 +197,12 @@ def rest_envelope(s: np.ndarray, centre: float, d1: np.ndarray, d2: np.ndarray,
     curvature terms |x_ss| v^2 and |x_sss| v^3 + 3 |x_ss| v A (A: the bound's path
     acceleration) take at most REST_CURVATURE_SHARE of every axis's amax and jmax. None
     where they take more (a bend near the rest): the caller keeps the conservative
-    envelope (`path_limits` / `envelope_limits`), which leaves them room."""
+    envelope (`path_limits` / `envelope_limits`), which leaves them room; also where the
+    bound is undefined (NaN: a node whose tangent vanishes, a pchip knot where the fit
+    stops in every axis)."""
     q, a = _rest_bound(s, centre, d1, limits, jerk_scale, acc_scale)
+    if np.any(np.isnan(q)):
+        return None
     near = q < q_top
     if np.any(near):
         v = np.sqrt(q[near])[:, None]
