@@ -16,9 +16,17 @@ import pytest
 from lookahead.checker import check_positions
 from lookahead.config import default_config
 from lookahead.geometry import fit_points
+from lookahead.limits import AxisLimits
 from lookahead.planning.base import PathState, PlanRequest
 from lookahead.planning.lp import LPPlanner
-from lookahead.planning.lp.envelope import path_limits, tangent_limits
+from lookahead.planning.lp.envelope import (
+    REST_CURVATURE_SHARE,
+    local_rest_q,
+    path_limits,
+    rest_envelope,
+    tangent_limits,
+)
+from lookahead.planning.lp.rows import GridGeometry
 from lookahead.sampling import sample_plan
 from motion_bounds import rest_to_rest_duration
 
@@ -55,10 +63,6 @@ def test_a_rest_in_a_bend_keeps_the_conservative_envelope() -> None:
     """`rest_envelope` follows the tangent where the curvature terms at its feeds stay
     small (a straight stroke), and gives way (None) where they do not (a rest on a circle
     of 30 mm, whose centripetal term reaches amax at 212 mm/s)."""
-    from lookahead.limits import AxisLimits
-    from lookahead.planning.lp.envelope import REST_CURVATURE_SHARE, local_rest_q, rest_envelope
-    from lookahead.planning.lp.rows import GridGeometry
-
     lim = AxisLimits(vmax=np.array([150.0, 150.0]), amax=np.array([1500.0, 1500.0]),
                      jmax=np.array([20000.0, 20000.0]))
     ones = np.ones(2)
