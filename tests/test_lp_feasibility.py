@@ -855,3 +855,54 @@ def test_stall_floors_accumulate():
     out = _SeesawLP()._unstall(plan, np.ones(n), q, np.zeros(n), np.ones(n), [],
                                {0: 0.0, n - 1: 0.0})
     assert out[3] > 0.0 and out[7] > 0.0
+
+
+#: `bench/fuzz_paths.py --method lp --seed 4402`'s failing case: a 2-axis pchip walk of 35
+#: points ~75 mm apart, whose knots stop the fit (12 rest nodes) and whose C1 knot at
+#: s = 803.4 caps 4 nodes 0.25 um apart at 0.03 mm/s
+FUZZ_PCHIP_CASE = (3, 2, 35, 1.878563037060509, 0.0, "pchip")
+
+
+class _StalledWarmRepairLP(LPPlanner):
+    """An LP planner whose repair rounds linearized at the last plan (`start_q`) stall
+    every jerk pass, as the fuzz case's whole-job repair did at s = 803.4."""
+
+    warm_failures = 0
+
+    def solve_grid(self, request, geo, tight, stop_idx, fixed_head=None, start_q=None,
+                   **kw):
+        from lookahead.planning.base import PlanningError
+
+        if start_q is not None:
+            self.warm_failures += 1
+            raise PlanningError("lp: the jerk LP has no solution")
+        return super().solve_grid(request, geo, tight, stop_idx, fixed_head, **kw)
+
+
+def test_a_repair_whose_warm_linearization_stalls_is_solved_afresh():
+    """A repair round's jerk LP, linearized at the last plan, can stall a stretch at q = 0
+    that no pass lifts (the fuzz case's whole job: 12 passes, each moving the stall by a
+    node, then "the jerk LP has no solution"). The round is then solved again from the
+    v+a solution at the tightened limits (`LPPlanner._relinearized_repair`): the plan
+    repairs, and passes the checker. A window of the fuzz path that needs one repair."""
+    from bench.fuzz_paths import DT, build
+
+    path, limits = build(FUZZ_PCHIP_CASE)
+    req = PlanRequest(path, limits.scaled(0.95), PathState(513.28148884), 976.603654, dt=DT)
+    planner = _StalledWarmRepairLP()
+    res = planner.plan(req)
+    assert planner.warm_failures > 0 and res.info["repairs"] > 0
+    rep = played(path, res.profile, limits, DT)
+    assert rep.violations == 0, rep.first
+
+
+@pytest.mark.slow
+def test_the_fuzz_pchip_walk_plans_as_one_whole_job():
+    """The fuzz case itself (67,577 nodes, ~70 s): it planned, and passes the checker."""
+    from bench.fuzz_paths import DT, build
+
+    path, limits = build(FUZZ_PCHIP_CASE)
+    req = PlanRequest(path, limits.scaled(0.95), PathState(0.0), path.length, dt=DT)
+    res = LPPlanner().plan(req)
+    rep = played(path, res.profile, limits, DT)
+    assert rep.violations == 0, rep.first

@@ -723,6 +723,14 @@ class LPPlanner:
                 return self.solve_grid(request, geo, tight, stop_idx, head,
                                        start_envelope=seam is None, **kw)
             except PlanningError:
+                if kw.get("start_q") is not None:
+                    # a repair linearized at the last plan whose jerk passes all stalled:
+                    # linearize afresh, from the v+a solution at the tightened limits
+                    # (`_relinearized_repair`)
+                    fresh = self._relinearized_repair(request, geo, tight, stop_idx, head,
+                                                      seam is None, kw)
+                    if fresh is not None:
+                        return fresh
                 if not can_relax or self._elastic:
                     raise
             if before is not None:  # a repair: fractions of its tightening in the start
@@ -851,6 +859,22 @@ class LPPlanner:
             "grid_q": plan.q,
         }
         return PlanResult(profile, self.name, 0.0, info)
+
+    def _relinearized_repair(self, request: PlanRequest, geo: GridGeometry, tight: Tightening,
+                             stop_idx: np.ndarray, head: np.ndarray | None,
+                             start_envelope: bool, kw: dict) -> GridPlan | None:
+        """A repair round again, its jerk rows linearized at the v+a solution (as the first
+        solve's) instead of at the last plan; None if that fails too. The last plan's q
+        can pin a stretch at near-zero feed: a tangent row at a tiny q* allows at most 3 q*,
+        and the 1/h^2 of a refined grid passes the pin on to the neighbours, so the stall
+        moves by a node per pass and `STALL_PASSES` cannot lift it (fuzz case (3, 2, 35,
+        1.8786, 0.0, 'pchip'): a C1 knot capping 4 nodes 0.25 um apart at 0.03 mm/s)."""
+        fresh = {key: val for key, val in kw.items() if key not in ("start_q", "passes")}
+        try:
+            return self.solve_grid(request, geo, tight, stop_idx, head,
+                                   start_envelope=start_envelope, **fresh)
+        except PlanningError:
+            return None
 
     @staticmethod
     def _rest_of_last(seam: Seam) -> PlanResult:
