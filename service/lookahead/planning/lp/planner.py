@@ -199,6 +199,20 @@ STALL_PASSES = 2
 #: floor attempts in `_unstall` (each one 4x lower after an infeasible one)
 STALL_FLOOR_TRIES = 4
 
+#: jerk passes of a seam plan's first solve (`LPPlanner.seam_passes`; max_passes if more):
+#: its fresh nodes are linearized at their upper bounds, far above the feed of a turnaround
+#: just after the last plan's window end, and one pass left the replan ~20 % slower there
+#: than a plan without that window end (cam-fp-hel70: the windowed job 1.2 % over the whole
+#: job; tests/test_lp_seam_passes.py). Trades replan compute for winding time. Engine-lp on
+#: the 64 non-long corpus paths (bench/results/corpus_seam_passes.json): windowed / whole
+#: job worst 1.0119 -> 1.0063, 8 paths faster (up to -1.24 %, cam-fp-layers), 2 slower
+#: (+1.10 % cam-style-R100, still 1.002x its whole job; +0.12 %); simplex iterations on the
+#: 16 hard paths 1.05x (cam-fp-layers 1.39x; bench/results/lp_work_seam_passes.json). 2
+#: passes: hel70 44.10 s, 3: 43.83 s, the whole job 43.77 s. Not for OSQP: its engine on
+#: the fast subset took 1.52x the compute (1.17x with the mill) for winding within -0.20 ..
+#: +1.06 % (bench/results/corpus_osqp_seam_passes{,_before}.json, side by side)
+SEAM_PASSES = 3
+
 #: `LPPlanner.brake_jerk`: the jerk (fraction of the path jerk along the start's tangent,
 #: `start_limits`) of the braking whose feed a moving start may keep above the LP's
 #: velocity caps (`_brake_room`): larger is a tighter room, which the LP's jerk rows (0.85
@@ -377,9 +391,10 @@ class LPPlanner:
     reuse: continue the last plan when a request starts on it (`Seam`, `plan`).
     seam_va_pass: at a seam, solve the velocity+acceleration LP for the jerk rows'
     linearization point beyond the reused nodes (default: the upper bounds there; the same
-    times and failures measured, 2-4 ms less). seam_jerk_change: keep the jerk-change rows
-    at a seam's first nodes (its head satisfies them). start_relief: nodes after a
-    moving start that get the limits themselves (`_relieve_start`). brake_jerk: the jerk
+    times and failures measured, 2-4 ms less). seam_passes: jerk passes of a seam plan's
+    first solve (None: `SEAM_PASSES`, except for OSQP: 1). seam_jerk_change: keep the
+    jerk-change rows at a seam's first nodes (its head satisfies them). start_relief: nodes
+    after a moving start that get the limits themselves (`_relieve_start`). brake_jerk: the jerk
     (fraction of the path jerk at the start) of the braking a moving start may keep above
     the LP's velocity caps (`_brake_room`). elastic: last relaxation of an infeasible LP
     from a moving start (`lp.elastic`; off: such a start fails, the caller falls back).
@@ -413,6 +428,7 @@ class LPPlanner:
         free_start_nodes: int = 3,
         reuse: bool = True,
         seam_va_pass: bool = False,
+        seam_passes: int | None = None,
         seam_jerk_change: bool = True,
         stall_floor: float = 0.1,
         start_relief: int = 2,
@@ -437,6 +453,8 @@ class LPPlanner:
         self.stall_floor = stall_floor
         self.reuse = reuse
         self.seam_va_pass = seam_va_pass
+        self.seam_passes = ((1 if solver == "osqp" else SEAM_PASSES) if seam_passes is None
+                            else seam_passes)
         self.seam_jerk_change = seam_jerk_change
         self._last: LastPlan | None = None
         self._corners: tuple[Path, float, np.ndarray] | None = None
@@ -779,7 +797,8 @@ class LPPlanner:
             return self.solve_grid(request, geo, tight, stop_idx, head, start_envelope=True,
                                    **kw)
 
-        plan = solve(q_star_head=q_star_head)
+        plan = solve(q_star_head=q_star_head,
+                     passes=None if seam is None else max(self.seam_passes, self.max_passes))
         allowance = self._start_allowance(request, geo, tight) if seam is None else None
         acc_allowance = self._start_acc_allowance(request, geo) if seam is None else None
         knotty = request.path.continuity() < 2
