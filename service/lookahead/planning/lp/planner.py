@@ -734,6 +734,8 @@ class LPPlanner:
         infeasible, `_start_zone`), then the check/repair loop."""
         s = geo.s
         can_relax = seam is None and head is None and request.start.v > REST
+        # jerk passes of the first solve (and of a repair solved afresh like it)
+        first_passes = None if seam is None else max(self.seam_passes, self.max_passes)
 
         def solve(before: Tightening | None = None, **kw) -> GridPlan:
             """The LP at `tight`; `before`: the factors before a repair's tightening."""
@@ -746,7 +748,8 @@ class LPPlanner:
                     # linearize afresh, from the v+a solution at the tightened limits
                     # (`_relinearized_repair`)
                     fresh = self._relinearized_repair(request, geo, tight, stop_idx, head,
-                                                      seam is None, kw)
+                                                      seam is None,
+                                                      {**kw, "passes": first_passes})
                     if fresh is not None:
                         return fresh
                 if not can_relax or self._elastic:
@@ -797,8 +800,7 @@ class LPPlanner:
             return self.solve_grid(request, geo, tight, stop_idx, head, start_envelope=True,
                                    **kw)
 
-        plan = solve(q_star_head=q_star_head,
-                     passes=None if seam is None else max(self.seam_passes, self.max_passes))
+        plan = solve(q_star_head=q_star_head, passes=first_passes)
         allowance = self._start_allowance(request, geo, tight) if seam is None else None
         acc_allowance = self._start_acc_allowance(request, geo) if seam is None else None
         knotty = request.path.continuity() < 2
@@ -882,13 +884,16 @@ class LPPlanner:
     def _relinearized_repair(self, request: PlanRequest, geo: GridGeometry, tight: Tightening,
                              stop_idx: np.ndarray, head: np.ndarray | None,
                              start_envelope: bool, kw: dict) -> GridPlan | None:
-        """A repair round again, its jerk rows linearized at the v+a solution (as the first
-        solve's) instead of at the last plan; None if that fails too. The last plan's q
-        can pin a stretch at near-zero feed: a tangent row at a tiny q* allows at most 3 q*,
-        and the 1/h^2 of a refined grid passes the pin on to the neighbours, so the stall
-        moves by a node per pass and `STALL_PASSES` cannot lift it (fuzz case (3, 2, 35,
-        1.8786, 0.0, 'pchip'): a C1 knot capping 4 nodes 0.25 um apart at 0.03 mm/s)."""
-        fresh = {key: val for key, val in kw.items() if key not in ("start_q", "passes")}
+        """A repair round again, its jerk rows linearized as the first solve's (the v+a
+        solution; at a seam the last plan's q on the reused nodes and the upper bounds
+        beyond) instead of at the last plan's solution everywhere, with the first solve's
+        passes (in `kw`); None if that fails too.
+        The last plan's q can pin a stretch at near-zero feed: a tangent row at a tiny q*
+        allows at most 3 q*, and the 1/h^2 of a refined grid passes the pin on to the
+        neighbours, so the stall moves by a node per pass and `STALL_PASSES` cannot lift it
+        (fuzz case (3, 2, 35, 1.8786, 0.0, 'pchip'): a C1 knot capping 4 nodes 0.25 um
+        apart at 0.03 mm/s)."""
+        fresh = {key: val for key, val in kw.items() if key != "start_q"}
         try:
             return self.solve_grid(request, geo, tight, stop_idx, head,
                                    start_envelope=start_envelope, **fresh)
