@@ -40,7 +40,7 @@ from heuristic_paths import issue13_fourier_points
 from lookahead.checker import check_positions
 from lookahead.config import default_config
 from lookahead.geometry import fit_points, preset_points
-from lookahead.planning.base import PathState, PlanRequest
+from lookahead.planning.base import PathState, PlanningError, PlanRequest
 from lookahead.planning.heuristic import HeuristicPlanner
 from lookahead.planning.lp import LPPlanner
 from lookahead.planning.lp.envelope import path_limits
@@ -140,7 +140,6 @@ def test_random_moving_starts_never_raise(tube, frac_s, frac_v, frac_a):
     the checker at the limits, or up to 2 % above them (a state after an override may lie
     that far above); a random state that no plan can continue (accelerating at the cap,
     too fast for the turnaround ahead) is not a well-formed request."""
-    from lookahead.planning.base import PlanningError
     from lookahead.planning.heuristic import HeuristicPlanner
 
     limits = MACHINE.limits.scaled(0.98)
@@ -191,8 +190,6 @@ def test_a_start_accelerating_hard_before_a_turnaround_plans(tube):
     profile starts at a0 exactly: 3.8x, 7.2x jmax at t = 0. Now the slope row's slack is
     dominated (`lp.elastic.EQUALITY_WEIGHT`) and a repair that makes the LP infeasible is
     first tried at fractions of its tightening (`REPAIR_BACKOFF`)."""
-    from lookahead.planning.base import PlanningError
-
     limits = MACHINE.limits.scaled(0.98)
     start = _state(tube, limits, 0.599, 0.4921875, 0.8125)
     req = PlanRequest(tube, limits, start, start.s + 1400.0, dt=MACHINE.dt)
@@ -587,8 +584,6 @@ def test_dwell_layer_window_braking_into_its_turnaround_plans(corpus_all_few, gr
     to 0.78, and the repairs converge. Grid steps (mm; None: the default, 5.96): of
     eight from 3 to 6.5 mm only 3 planned before; the 5 mm grid also needs the repairs
     beyond the start zone to keep their whole tightening (`REPAIR_BACKOFF`)."""
-    from lookahead.planning.base import PlanningError
-
     p = corpus_all_few["w-hel-R100-a45-dwell-2mm"]
     path, m = p.path(), p.config.machine
     start = PathState(1321.9705411498176, 958.3663949185747, -1388.209015223072)
@@ -648,8 +643,6 @@ def test_an_empty_window_is_a_planning_error_not_a_crash():
     """A request whose window is empty (start at s_end) is refused with PlanningError;
     it used to end in ZeroDivisionError in the finer-grid retries of a cold plan (found by
     bench/replan_continuity.py on c-short-xy-0p5mm)."""
-    from lookahead.planning.base import PlanningError
-
     _, pts, _ = preset_points("tube-1450")
     path = fit_points(pts[:40], np.asarray(MACHINE.path_scale), "cubic")
     s = path.length / 2
@@ -736,8 +729,6 @@ def test_a_start_accelerating_hard_near_the_job_end_plans():
     own plan: only C moves at the stroke's end, 51300 mm/s^3) and the elastic start gave
     9x jmax at the start. Now the room is capped by the way into the end at its own
     tangents (`lp.envelope.local_rest_q`)."""
-    from lookahead.planning.base import PlanningError
-
     path = stroke_with_turns()
     limits = MACHINE.limits.scaled(default_config().planner.margin)
     start = PathState(2790.1534550769134, 1087.4558276506175, 3813.8685148444533)
@@ -871,8 +862,6 @@ class _StalledWarmRepairLP(LPPlanner):
 
     def solve_grid(self, request, geo, tight, stop_idx, fixed_head=None, start_q=None,
                    **kw):
-        from lookahead.planning.base import PlanningError
-
         if start_q is not None:
             self.warm_failures += 1
             raise PlanningError("lp: the jerk LP has no solution")
@@ -898,7 +887,7 @@ def test_a_repair_whose_warm_linearization_stalls_is_solved_afresh():
 
 @pytest.mark.slow
 def test_the_fuzz_pchip_walk_plans_as_one_whole_job():
-    """The fuzz case itself (67,577 nodes, ~70 s): it planned, and passes the checker."""
+    """The fuzz case itself (67,577 nodes, 70-110 s): it plans, and passes the checker."""
     from bench.fuzz_paths import DT, build
 
     path, limits = build(FUZZ_PCHIP_CASE)
