@@ -186,7 +186,7 @@ def local_rest_q(s: np.ndarray, centre: float, tangents: np.ndarray, limits: Axi
 #: (bench/results/corpus_rest_envelopes.json against ..._before.json); 0.03 and 0.25
 #: plan the fast subset as 0.1 does to 0.61 % (1-3 paths of 16 differ,
 #: corpus_rest_share_0p03.json, corpus_rest_share_0p25.json)
-REST_CURVATURE_SHARE = 0.1
+REST_CURVATURE_SHARE = 0.25
 
 
 def rest_envelope(s: np.ndarray, centre: float, d1: np.ndarray, d2: np.ndarray,
