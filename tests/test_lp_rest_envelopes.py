@@ -86,7 +86,7 @@ def test_a_rest_in_a_bend_keeps_the_conservative_envelope() -> None:
                                  q_top) is None
         else:
             assert env is None
-            # the coupling 3 |x_ss| v A (A <= 1500 here) takes the share at v >= 0.1 jmax
+            # the coupling 3 |x_ss| v A (A <= 1500 here) takes the share at v >= share jmax
             # R / (3 * 1500): a bound that stops below it follows the tangent on the circle
             v = REST_CURVATURE_SHARE * 20000.0 * 30.0 / (3.0 * 1500.0)
             near = rest_envelope(geo.s, 0.0, geo.d1, geo.d2, geo.d3, lim, scale, scale,

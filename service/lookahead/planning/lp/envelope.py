@@ -185,7 +185,10 @@ def local_rest_q(s: np.ndarray, centre: float, tangents: np.ndarray, limits: Axi
 #: 0.1, 0.25 and 0.5). At 0.1 on the 64 non-long corpus paths: lp 27 faster, 2 slower
 #: (bench/results/corpus_rest_envelopes.json against ..._before.json); 0.03 and 0.25
 #: plan the fast subset as 0.1 does to 0.61 % (1-3 paths of 16 differ,
-#: corpus_rest_share_0p03.json, corpus_rest_share_0p25.json)
+#: corpus_rest_share_0p03.json, corpus_rest_share_0p25.json). 0.25 since stop 45, on all
+#: 64 (corpus_rest_share_0p25_all.json against corpus_stop45.json): 0 failures, lp 4
+#: faster (c-rand3-xyz-2000pts -3.3 %, n-heart -2.5 %: its start and end, 1.028 -> 1.002x
+#: the fine-grid reference), 0 slower; engine-lp 7 faster, 1 slower (+0.30 %, hel25)
 REST_CURVATURE_SHARE = 0.25
 
 
