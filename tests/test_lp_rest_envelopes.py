@@ -1,5 +1,6 @@
 """The LP's envelopes into and out of rest follow the tangent where the rest is
-(`LPPlanner._local_rest`, `lp.envelope.local_rest_q`), not the worst tangent of the path.
+(`LPPlanner._envelope`, `lp.envelope.rest_envelope`), not the worst tangent of the path,
+where the curvature terms near the rest stay small.
 
 Near a rest the curvature terms vanish with the feed, so the axis limits bound the path
 acceleration and jerk through the tangent alone: min_k amax_k / |x'_k|. The envelopes

@@ -307,7 +307,8 @@ def test_take_overs_avoid_the_plan_in_forces_hard_braking(monkeypatch) -> None:
     the plan's final braking) fell in its slowdown 107 times of 110; replans from braking
     states were the LP's slowest and least robust. Since the LP's envelope into a window's
     end follows the tangent there (stop 44, `lp.envelope.rest_envelope`) its braking is
-    shorter: 5 plain take-overs of 94 fall in it, 1 with the rule."""
+    shorter: 5 plain take-overs of 94 fell in it, 1 with the rule (measured at stop 44,
+    `REST_CURVATURE_SHARE` 0.1)."""
     from bench.corpus import load_corpus
 
     import lookahead.stream.engine as engine_module

@@ -748,8 +748,7 @@ class LPPlanner:
                     # linearize afresh, from the v+a solution at the tightened limits
                     # (`_relinearized_repair`)
                     fresh = self._relinearized_repair(request, geo, tight, stop_idx, head,
-                                                      seam is None,
-                                                      {**kw, "passes": first_passes})
+                                                      seam is None, first_passes, kw)
                     if fresh is not None:
                         return fresh
                 if not can_relax or self._elastic:
@@ -883,20 +882,21 @@ class LPPlanner:
 
     def _relinearized_repair(self, request: PlanRequest, geo: GridGeometry, tight: Tightening,
                              stop_idx: np.ndarray, head: np.ndarray | None,
-                             start_envelope: bool, kw: dict) -> GridPlan | None:
-        """A repair round again, its jerk rows linearized as the first solve's (the v+a
-        solution; at a seam the last plan's q on the reused nodes and the upper bounds
-        beyond) instead of at the last plan's solution everywhere, with the first solve's
-        passes (in `kw`); None if that fails too.
+                             start_envelope: bool, passes: int | None, kw: dict
+                             ) -> GridPlan | None:
+        """A repair round (`solve_grid`'s keywords `kw`) again, its jerk rows linearized
+        as the first solve's (the v+a solution; at a seam the last plan's q on the reused
+        nodes and the upper bounds beyond) instead of at the last plan's solution
+        everywhere, with the first solve's `passes`; None if that fails too.
         The last plan's q can pin a stretch at near-zero feed: a tangent row at a tiny q*
         allows at most 3 q*, and the 1/h^2 of a refined grid passes the pin on to the
         neighbours, so the stall moves by a node per pass and `STALL_PASSES` cannot lift it
         (fuzz case (3, 2, 35, 1.8786, 0.0, 'pchip'): a C1 knot capping 4 nodes 0.25 um
         apart at 0.03 mm/s)."""
-        fresh = {key: val for key, val in kw.items() if key != "start_q"}
         try:
             return self.solve_grid(request, geo, tight, stop_idx, head,
-                                   start_envelope=start_envelope, **fresh)
+                                   start_envelope=start_envelope,
+                                   **{**kw, "start_q": None, "passes": passes})
         except PlanningError:
             return None
 
