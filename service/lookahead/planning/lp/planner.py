@@ -6,7 +6,8 @@ the travel time no longer improves. The grid solution becomes a C2 quintic profi
 (`lp.profile`), whose continuous axis velocity, acceleration and jerk are checked every
 dt/2 (`sampled_check.analytic_ratios`, a bound on the checker's finite differences);
 where it breaks a limit (between nodes the jerk can overshoot), the rows of the nearby
-nodes are tightened and one jerk pass is solved again (the repair loop).
+nodes are tightened and one jerk pass is solved again (the repair loop; after its first
+round only on zones around the excesses, `lp.local_repair`).
 
 Feasibility (issue 13): q = 0 satisfies every velocity, acceleration, jerk and jerk-change
 row, so from rest to rest every LP here is feasible; what can make it infeasible is what
@@ -64,6 +65,7 @@ and the check now include (`lp.knots`).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from functools import partial
 
@@ -105,6 +107,11 @@ from lookahead.planning.lp.grid import (
 )
 from lookahead.planning.lp.handover import plan_handed_over
 from lookahead.planning.lp.knots import c1_knot_caps, knot_fd_ratio, knot_jumps, knot_steps
+from lookahead.planning.lp.local_repair import (
+    held_rows,
+    repair_zone,
+    zone_rows,
+)
 from lookahead.planning.lp.profile import (
     grid_time,
     node_accelerations,
@@ -212,6 +219,37 @@ STALL_FLOOR_TRIES = 4
 #: the fast subset took 1.52x the compute (1.17x with the mill) for winding within -0.20 ..
 #: +1.06 % (bench/results/corpus_osqp_seam_passes{,_before}.json, side by side)
 SEAM_PASSES = 3
+#: repair rounds after the first (`LPPlanner.local_repair`, `lp.local_repair`): re-solve the
+#: nodes within this many of an interval with a sampled excess, the rest held at the last
+#: plan; an infeasible zone grows LOCAL_REPAIR_GROWTH x until it is the whole grid, and the
+#: next round starts at the reach that was feasible. Trades the global rounds'
+#: re-optimization everywhere for rounds that do not move the checked rest of the plan
+#: (reach 32 or 128: five paths within 1 % of each other, compute better either way by path).
+#: Side by side on the 64 non-long corpus paths (bench/results/corpus_local_repair.json
+#: against corpus_local_repair_before.json): 0 failures, fallbacks, violations either way;
+#: whole-job lp compute 0.78x, winding geometric mean -0.24 % (cam-fp-hel45-D30 -11.5 %,
+#: D60 -2.9 %; worst +2.6 %, w-hel-R100-a45-sine-2mm-pchip, +0.8 % c-polyline-deg1-30);
+#: engine-lp compute 0.96x, -0.08 % (D30 -2.7 %; worst the same two), but the engine's
+#: cam-feed-w3-F6000-L150 3.5x compute (more failed seam attempts after its third window).
+#: Local rounds at plans from scratch only: windowed / whole job 1.017 on cam-style-R100
+#: (its whole job gained 2.1 %, its seam plans 0.7 %). Not for OSQP: its engine on the fast
+#: subset but the mill, n-butterfly +18.7 % (8.36 -> 9.93 s, 2.3x compute), c-corners-2d
+#: +2.2 %, compute summed 1.13x (bench/results/corpus_osqp_local_repair{,_before}.json)
+LOCAL_REPAIR_REACH = 32
+LOCAL_REPAIR_GROWTH = 4
+#: repair rounds solved on the whole grid before the local ones: the first acts as one more
+#: jerk pass at the tightened rows (c-corners-bspline-3d-quintic: 7.435 -> 7.244 s); with
+#: every round local that path planned 3.8 % slower than with global rounds, with the
+#: first global as fast. 2 or 3 global rounds, on six paths: no better (the pchip helix
+#: 6.645 -> 6.510 / 6.477 s, but cam-fp-hel45-D30's whole job 18.86 -> 21.31 / 19.14 s)
+GLOBAL_REPAIR_ROUNDS = 1
+#: a zone up to this share of the grid is solved as an LP of its own, on the zone's nodes
+#: (cold, on `LPPlanner.zone_backend`); a larger one as the whole grid's LP with the held
+#: nodes fixed, from the last solve's basis (n-butterfly: zones of 1,100 of 1,476 nodes
+#: took ~68 ms on their own, ~45 ms warm, a global round ~25 ms; a zone of 66 of 5,635 nodes
+#: ~115 ms warm in the whole LP). Global rounds instead of zones over half the grid lost
+#: the local rounds' gain on the long whole-job plans, whose excesses are everywhere
+ZONE_LP_MAX_SHARE = 0.5
 
 #: `LPPlanner.brake_jerk`: the jerk (fraction of the path jerk along the start's tangent,
 #: `start_limits`) of the braking whose feed a moving start may keep above the LP's
@@ -408,6 +446,10 @@ class LPPlanner:
     planner's plan to its first zero-acceleration state that the LP plans from
     (`lp.handover`; off: such a start fails, the caller falls back). transient: that
     planner (None: the heuristic at the request's limits, made on first use).
+    local_repair: the repair rounds after the first GLOBAL_REPAIR_ROUNDS re-solve only the
+    nodes within this many nodes of a sampled excess (`lp.local_repair`; None:
+    `LOCAL_REPAIR_REACH`, except for OSQP: 0, every round on the whole grid, as before
+    issue 13's stop 47).
     """
 
     name = "lp"
@@ -439,11 +481,14 @@ class LPPlanner:
         axis_jerk_change: bool | None = None,
         handover: bool = True,
         transient: Planner | None = None,
+        local_repair: int | None = None,
     ) -> None:
         if objective not in OBJECTIVES:
             raise ValueError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
         self.objective = objective
         self.handover = handover
+        self.local_repair = ((0 if solver == "osqp" else LOCAL_REPAIR_REACH)
+                             if local_repair is None else local_repair)
         self.transient = transient
         self.start_relief = start_relief
         self.brake_jerk = brake_jerk
@@ -468,6 +513,9 @@ class LPPlanner:
         self.jerk_step = jerk_step
         self.solver = solver
         self.backend = make_backend(solver)
+        #: the solver of local repair rounds' zone LPs: its own, so that they leave the
+        #: window LPs' warm start (HiGHS's carried basis, OSQP's last solution) as it was
+        self.zone_backend = make_backend(solver)
         self.grid_step = grid_step
         self.max_passes = max_passes
         self.max_repairs = max_repairs
@@ -691,9 +739,10 @@ class LPPlanner:
         """Drop the last plan and the solver's carried bases (the next request is planned
         from scratch, whatever was planned before)."""
         self._last = None
-        forget = getattr(self.backend, "forget", None)
-        if callable(forget):
-            forget()
+        for backend in (self.backend, self.zone_backend):
+            forget = getattr(backend, "forget", None)
+            if callable(forget):
+                forget()
 
     def find_seam(self, request: PlanRequest) -> Seam | None:
         """The seam with the last plan if the request starts on it (`seam.find_seam`)."""
@@ -743,6 +792,8 @@ class LPPlanner:
                 return self.solve_grid(request, geo, tight, stop_idx, head,
                                        start_envelope=seam is None, **kw)
             except PlanningError:
+                if kw.get("hold") is not None:
+                    raise  # a local repair round: `_repair_round` widens its zone
                 if kw.get("start_q") is not None:
                     # a repair linearized at the last plan whose jerk passes all stalled:
                     # linearize afresh, from the v+a solution at the tightened limits
@@ -806,6 +857,7 @@ class LPPlanner:
         repairs = 0
         worst = float("nan")
         trouble: list[float] = []  # where each repair round's worst excess was (s)
+        reach = self.local_repair  # of the next local repair round's zones (0: global)
         lowest, free = np.inf, 0  # the smallest worst ratio so far; rounds not counted
         may_split = self._stuck_rule and (seam is not None or head is None)
         while True:
@@ -860,7 +912,10 @@ class LPPlanner:
             # at a seam, q_star_head keeps the jerk-change rows on its first nodes as in
             # the first solve (without: the nodal jerk zig-zagged there, round after
             # round, until the LP was infeasible; tests/test_lp_seam_repairs.py)
-            plan = solve(before=before, start_q=plan.q, passes=1, q_star_head=q_star_head)
+            local = repairs >= GLOBAL_REPAIR_ROUNDS
+            plan, reached = self._repair_round(solve, before, plan, ratios, full,
+                                               q_star_head, reach if local else 0)
+            reach = reached if local else reach
             repairs += 1
         a_end = 0.0  # at rest, or at v_end with path acceleration 0
         self._last = LastPlan(request, geo, plan.q, node_accelerations(s, plan.q, a_start, a_end),
@@ -896,7 +951,8 @@ class LPPlanner:
         try:
             return self.solve_grid(request, geo, tight, stop_idx, head,
                                    start_envelope=start_envelope,
-                                   **{**kw, "start_q": None, "passes": passes})
+                                   **{**kw, "start_q": None, "passes": passes,
+                                      "hold": None})
         except PlanningError:
             return None
 
@@ -1037,13 +1093,15 @@ class LPPlanner:
         passes: int | None = None,
         start_envelope: bool = True,
         q_star_head: np.ndarray | None = None,
+        hold: np.ndarray | None = None,
     ) -> GridPlan:
         """Velocity+acceleration pass (unless start_q is given), then up to `passes`
         (default max_passes) jerk passes. start_envelope: bound q by the S-curve from the
         start state (not at a seam, whose first nodes are fixed). q_star_head: the jerk
         rows' linearization point on the first nodes (a seam's last solution there; with
         start_q, which then linearizes everywhere, it only says "at a seam": the
-        jerk-change rows on the first nodes stay, `seam_jerk_change`)."""
+        jerk-change rows on the first nodes stay, `seam_jerk_change`). hold: (n,) mask of
+        the nodes held at start_q, a local repair round (`lp.local_repair`)."""
         lim = request.limits
         q_hi = np.minimum(self._caps(request, geo, tight),
                           self._envelope(request, geo, tight, stop_idx,
@@ -1087,6 +1145,9 @@ class LPPlanner:
             # (not at a seam, whose head satisfies it: its own plan's rows)
             rest += list(range(self.free_start_nodes))
         rest = np.unique(np.array(rest, dtype=int))
+        holdable = None  # the nodes a local repair round may hold at start_q
+        if hold is not None and start_q is not None:
+            holdable = hold & ~np.isin(np.arange(geo.n_nodes), list(fixed))
         best_q, best_t = None, np.inf
         n_passes = passes or self.max_passes
         knot = knot_jumps(request.path, geo.s)
@@ -1106,12 +1167,19 @@ class LPPlanner:
             rows = [*base, jerk_rows(geo, lim.jmax, tight.jerk, q_star, q_floor, knot),
                     jerk_change_rows(geo, lim.jmax, q_star, q_floor, self.jerk_step, rest,
                                      axis_jerk=self.axis_jerk_change)]
+            lo, hi, pinned_q, held = q_lo, q_hi, fixed, None
+            if holdable is not None:
+                held = holdable
+                q_held = np.maximum(start_q, 0.0)
+                rows = [held_rows(r, q_held, held) for r in rows]
+                lo, hi = np.where(held, q_held, q_lo), np.where(held, q_held, q_hi)
+                pinned_q = fixed | {int(i): float(q_held[i]) for i in np.flatnonzero(held)}
             w = (weight if by_distance else
                  self._pass_weight(weight, q_star, k > 0 or start_q is not None))
-            q = self._solve(plan, w, q_lo, q_hi, rows, geo.n_nodes, record=True)
-            for i, val in fixed.items():  # exactly, not to the solver's rounding
+            q = self._solve(plan, w, lo, hi, rows, geo.n_nodes, record=True, held=held)
+            for i, val in pinned_q.items():  # exactly, not to the solver's rounding
                 q[i] = val
-            q = self._unstall(plan, weight, q, q_lo, q_hi, rows, fixed)
+            q = self._unstall(plan, weight, q, lo, hi, rows, pinned_q)
             t = grid_time(geo.s, q)
             plan.pass_times.append(t)
             if (not np.isfinite(t) and best_q is None and not by_distance
@@ -1233,19 +1301,41 @@ class LPPlanner:
         return q
 
     def _solve(self, plan: GridPlan, weight, q_lo, q_hi, rows: list[Rows], n: int,
-               record: bool) -> np.ndarray:
-        lp = ScaledLP.build(weight, q_lo, q_hi, free_rows(Rows.stack(rows, n), q_lo >= q_hi),
-                            nodes=plan.s)
+               record: bool, held: np.ndarray | None = None) -> np.ndarray:
+        """The LP max weight.q at these bounds and rows (rows on fixed nodes only are
+        dropped). held: nodes fixed at q_lo (= q_hi) for a local repair round; the LP is
+        then solved on the other nodes alone (`lp.local_repair.zone_rows`), or, if they
+        are more than ZONE_LP_MAX_SHARE of the grid, as the whole LP in the last solve's
+        shape (its rows on held nodes only kept), which HiGHS starts from its basis."""
+        if held is None or not held.any() or self._elastic:
+            return self._solve_lp(plan, weight, q_lo, q_hi, Rows.stack(rows, n), plan.s,
+                                  self.backend)
+        zone = ~held
+        if np.mean(zone) > ZONE_LP_MAX_SHARE:  # the rows through held nodes only stay
+            return self._solve_lp(plan, weight, q_lo, q_hi, Rows.stack(rows, n), plan.s,
+                                  self.backend, fixed=(q_lo >= q_hi) & zone)
+        q = q_lo.copy()
+        q[zone] = self._solve_lp(plan, weight[zone], q_lo[zone], q_hi[zone],
+                                 zone_rows(Rows.stack(rows, n), held, q_lo), plan.s[zone],
+                                 self.zone_backend)
+        return q
+
+    def _solve_lp(self, plan: GridPlan, weight, q_lo, q_hi, rows: Rows, nodes: np.ndarray,
+                  backend, fixed: np.ndarray | None = None) -> np.ndarray:
+        """`_solve` on one block of rows by `backend`, the variables at `nodes` (path
+        units); rows on `fixed` variables only (default: q_lo >= q_hi) are dropped."""
+        fixed = q_lo >= q_hi if fixed is None else fixed
+        lp = ScaledLP.build(weight, q_lo, q_hi, free_rows(rows, fixed), nodes=nodes)
         if self._elastic:
             lp, _ = elastic_lp(lp, self._elastic)
         t0 = time.perf_counter()
-        out = self.backend.solve(lp)
+        out = backend.solve(lp)
         plan.solver_ms.append(1e3 * (time.perf_counter() - t0))
         plan.statuses.append(out.status)
         if not out.ok:
             raise PlacedPlanningError(f"lp: {self.solver} returned {out.status}",
                                       float(plan.s[0]))
-        return out.q[:n]
+        return out.q[:nodes.size]
 
     def _remargin(self, request: PlanRequest, geo: GridGeometry, tight: Tightening,
                   stop_idx: np.ndarray, head: np.ndarray | None, relaxed: GridPlan,
@@ -1493,6 +1583,30 @@ class LPPlanner:
 
     def _profile(self, request: PlanRequest, plan: GridPlan, a_start: float) -> FeedProfile:
         return profile_from_grid(plan.s, plan.q, a_start, 0.0)  # ends with acceleration 0
+
+    def _repair_round(self, solve: Callable[..., GridPlan], before: Tightening,
+                      plan: GridPlan, ratios: SampledRatios, profile: FeedProfile,
+                      q_star_head: np.ndarray | None, reach: int
+                      ) -> tuple[GridPlan, int]:
+        """One repair round's jerk pass, linearized at the last plan (its nodes `plan.s`,
+        its profile `profile`, whose check found `ratios`, on the profile's clock): first
+        on the zones of `reach` nodes around the excesses with the other nodes held
+        (`lp.local_repair`), each infeasible zone LOCAL_REPAIR_GROWTH x wider; then on the
+        whole grid (at once if reach is 0). Returns the plan and the reach for the next
+        round: the one that was feasible, 0 if none was (n-butterfly's zones were
+        infeasible at 32 nodes and feasible at 128 round after round; on
+        c-corners-bspline-2d none was, 10 LPs for nothing)."""
+        node_times = profile.s_of_t.x - profile.s_of_t.x[0]
+        while 0 < reach < plan.s.size:
+            zone = repair_zone(ratios, node_times, reach)
+            if zone.all():
+                break
+            try:
+                return solve(before=before, start_q=plan.q, passes=1,
+                             q_star_head=q_star_head, hold=~zone), reach
+            except PlanningError:
+                reach *= LOCAL_REPAIR_GROWTH
+        return solve(before=before, start_q=plan.q, passes=1, q_star_head=q_star_head), 0
 
     @staticmethod
     def _tighten(tight: Tightening, ratios: SampledRatios, profile: FeedProfile,
