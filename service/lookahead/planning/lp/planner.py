@@ -1145,9 +1145,14 @@ class LPPlanner:
             # (not at a seam, whose head satisfies it: its own plan's rows)
             rest += list(range(self.free_start_nodes))
         rest = np.unique(np.array(rest, dtype=int))
-        holdable = None  # the nodes a local repair round may hold at start_q
+        # a local repair round: the nodes held at start_q (not the fixed ones), their
+        # bounds, and every pinned value the solutions get exactly
+        held, lo, hi, pinned_q = None, q_lo, q_hi, fixed
         if hold is not None and start_q is not None:
-            holdable = hold & ~np.isin(np.arange(geo.n_nodes), list(fixed))
+            held = hold & ~np.isin(np.arange(geo.n_nodes), list(fixed))
+            q_held = np.maximum(start_q, 0.0)
+            lo, hi = np.where(held, q_held, q_lo), np.where(held, q_held, q_hi)
+            pinned_q = fixed | {int(i): float(q_held[i]) for i in np.flatnonzero(held)}
         best_q, best_t = None, np.inf
         n_passes = passes or self.max_passes
         knot = knot_jumps(request.path, geo.s)
@@ -1167,13 +1172,8 @@ class LPPlanner:
             rows = [*base, jerk_rows(geo, lim.jmax, tight.jerk, q_star, q_floor, knot),
                     jerk_change_rows(geo, lim.jmax, q_star, q_floor, self.jerk_step, rest,
                                      axis_jerk=self.axis_jerk_change)]
-            lo, hi, pinned_q, held = q_lo, q_hi, fixed, None
-            if holdable is not None:
-                held = holdable
-                q_held = np.maximum(start_q, 0.0)
+            if held is not None:
                 rows = [held_rows(r, q_held, held) for r in rows]
-                lo, hi = np.where(held, q_held, q_lo), np.where(held, q_held, q_hi)
-                pinned_q = fixed | {int(i): float(q_held[i]) for i in np.flatnonzero(held)}
             w = (weight if by_distance else
                  self._pass_weight(weight, q_star, k > 0 or start_q is not None))
             q = self._solve(plan, w, lo, hi, rows, geo.n_nodes, record=True, held=held)
