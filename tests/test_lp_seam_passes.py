@@ -1,8 +1,9 @@
 """A seam plan's first solve takes `SEAM_PASSES` jerk passes (issue 13: windowed LP within
 1 % of the whole-job LP).
 
-At a seam the fresh nodes' jerk rows are linearized at their upper bounds (`seam_va_pass`
-off), far above the feed a turnaround allows: the tangent row at q* allows |jerk| <=
+At a seam the fresh nodes' jerk rows are linearized above the feed a turnaround allows (at
+the velocity+acceleration LP's solution, `seam_va_pass`; when measured below, at the caps,
+far above): the tangent row at q* allows |jerk| <=
 J (3/2 - q / (2 q*)) sqrt(q / q*), 0.44 J at q*/4, and one pass left the replan's
 turnaround slower than a plan that never had a window end there. On cam-fp-hel70 the
 service's replan from s = 4737.7 crossed the turnaround after the last window's end

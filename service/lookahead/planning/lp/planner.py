@@ -428,8 +428,15 @@ class LPPlanner:
     not converge with the path-jerk rows on n-butterfly).
     reuse: continue the last plan when a request starts on it (`Seam`, `plan`).
     seam_va_pass: at a seam, solve the velocity+acceleration LP for the jerk rows'
-    linearization point beyond the reused nodes (default: the upper bounds there; the same
-    times and failures measured, 2-4 ms less). seam_passes: jerk passes of a seam plan's
+    linearization point beyond the reused nodes (off: the upper bounds there). Why on: a
+    frozen seam's fresh nodes begin about one braking distance before the last window's
+    end, where the last plan's q no longer applies; tangents at the caps (~3x the feed a
+    head accelerating out of a turnaround has) made the first jerk pass infeasible on 120
+    of 1,186 frozen attempts of the 64 non-long corpus paths (engine-lp), each then re-solved
+    half-frozen; with the v+a solution 78 fail, engine-lp compute 175 -> 130 s (0.75x;
+    fiberpath programs 0.59-0.82x), winding geometric mean -0.01 % (cam-fp-hel25 -0.8 %,
+    cam-fp-hel45-D30 +0.7 %: its last window's repairs, which move +-0.7 % with the seam
+    passes alone). seam_passes: jerk passes of a seam plan's
     first solve (None: `SEAM_PASSES`, except for OSQP: 1). seam_jerk_change: keep the
     jerk-change rows at a seam's first nodes (its head satisfies them). start_relief: nodes
     after a moving start that get the limits themselves (`_relieve_start`). brake_jerk: the jerk
@@ -469,7 +476,7 @@ class LPPlanner:
         zone_pad: int = 10,
         free_start_nodes: int = 3,
         reuse: bool = True,
-        seam_va_pass: bool = False,
+        seam_va_pass: bool = True,
         seam_passes: int | None = None,
         seam_jerk_change: bool = True,
         stall_floor: float = 0.1,
