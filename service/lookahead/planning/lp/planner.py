@@ -288,6 +288,18 @@ VEL_CUT = 0.998
 #: the dwell layer through the engine, a seam linearized at the upper bounds left the
 #: nodes beside its dwell at 1-4 mm/s, intervals of 1-2.6 s, 18.0 s for a 6.7 s window)
 RELINEARIZE_RATIO = 10.0
+#: a jerk pass that stalls in a dip (`stall_dips`) is solved once more with q* there at most
+#: this times `geometric_jerk_cap`, before `_unstall`. Why: at the fiberpath programs'
+#: turnarounds the v+a solution is ~10x the q the jerk rows allow (q* 15,000 against
+#: ~1,700 mm^2/s^2 on cam-fp-hel45-D60), the first pass dips to q = 0 there, and
+#: `_unstall` took 5-6 solves to lift it: 122 such stalls on the 64 non-long paths, 16 s of
+#: the engine's 135 s compute. 1.0: the tangent there then admits up to 3x the cap, above
+#: the ~0.6x the turnarounds plan at. Side by side on the 64 non-long paths
+#: (`corpus_stall_recap_{before,after}.json`): engine-lp compute 0.92x, whole-job lp 0.76x,
+#: winding -0.02 % / -0.06 % (worst cam-fp-hel45-D60 +0.7 % / +2.1 %, best the dwell cone
+#: -1.7 %, cam-fp-cone's whole job -2.6 %). Capped everywhere, not only at a stall, the
+#: linearization slowed bends the LP passes above that feed: the polar dome +2.4 %.
+STALL_RECAP = 1.0
 RELINEARIZE_EXTRA = 2
 #: ... when the intervals next to such nodes take more than this fraction of the pass's
 #: travel time (trades compute for time: on the fast corpus every pass for a smaller
@@ -315,6 +327,29 @@ def pinned_share(s: np.ndarray, q: np.ndarray, pinned: np.ndarray) -> float:
     with np.errstate(divide="ignore"):
         dt = np.where(vsum > 0, 2.0 * np.diff(s) / vsum, np.inf)
     return float(np.sum(dt[touch]))
+
+
+def geometric_jerk_cap(geo: GridGeometry, jmax: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Per node, the q = v^2 (path units^2 / s^2) at which the geometric jerk x_sss v^3
+    alone reaches scale_i jmax_k on some axis k: min_k (scale_i jmax_k / |x_sss,k|)^(2/3)
+    (inf where no axis bends). Not a bound (the path acceleration and jerk terms can
+    cancel it), an estimate of the feed at which the jerk rows hold a bend."""
+    with np.errstate(divide="ignore"):
+        v = np.cbrt(scale[:, None] * jmax[None, :] / np.abs(geo.d3))
+    return np.min(v, axis=1) ** 2
+
+
+def stall_dips(q: np.ndarray, q_star: np.ndarray, stalled: np.ndarray) -> np.ndarray:
+    """The nodes of each run of nodes solved below 1 / RELINEARIZE_RATIO of their
+    linearization point q* that holds a `stalled` node (a boolean mask): the dip of a
+    jerk pass linearized far above the feed its rows then allow."""
+    low = q * RELINEARIZE_RATIO < q_star
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], low.astype(np.int8), [0]])))
+    out = np.zeros(q.size, dtype=bool)
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        if stalled[a:b].any():
+            out[a:b] = True
+    return out
 
 
 def lift_dips(q: np.ndarray, q_hi: np.ndarray, fixed: np.ndarray) -> np.ndarray:
@@ -457,6 +492,9 @@ class LPPlanner:
     nodes within this many nodes of a sampled excess (`lp.local_repair`; None:
     `LOCAL_REPAIR_REACH`, except for OSQP: 0, every round on the whole grid, as before
     issue 13's stop 47).
+    stall_recap: a jerk pass that stalls in a dip far below its linearization point is
+    solved once more with the dip linearized at the geometric-jerk feed (`stall_dips`,
+    `STALL_RECAP`) before `_unstall` (off: `_unstall` at once, as before stop 48).
     """
 
     name = "lp"
@@ -489,6 +527,7 @@ class LPPlanner:
         handover: bool = True,
         transient: Planner | None = None,
         local_repair: int | None = None,
+        stall_recap: bool = True,
     ) -> None:
         if objective not in OBJECTIVES:
             raise ValueError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
@@ -508,6 +547,7 @@ class LPPlanner:
         self.seam_passes = ((1 if solver == "osqp" else SEAM_PASSES) if seam_passes is None
                             else seam_passes)
         self.seam_jerk_change = seam_jerk_change
+        self.stall_recap = stall_recap
         self._last: LastPlan | None = None
         self._corners: tuple[Path, float, np.ndarray] | None = None
         self._split: np.ndarray | None = None  # `_plan_cold`: split the grid near these s
@@ -1175,6 +1215,7 @@ class LPPlanner:
         # window: a 14.5 s plan with nodes at q = 0, 5.5 s with the retry; the engine's
         # job 17.1 -> 8.1 s, the distance objective's 8.0 s)
         by_distance = False
+        recapped = False  # the one stall re-linearization of this solve (`stall_dips`)
         while True:
             rows = [*base, jerk_rows(geo, lim.jmax, tight.jerk, q_star, q_floor, knot),
                     jerk_change_rows(geo, lim.jmax, q_star, q_floor, self.jerk_step, rest,
@@ -1186,6 +1227,16 @@ class LPPlanner:
             q = self._solve(plan, w, lo, hi, rows, geo.n_nodes, record=True, held=held)
             for i, val in pinned_q.items():  # exactly, not to the solver's rounding
                 q[i] = val
+            if not recapped and held is None and self.stall_recap:
+                # a stall in a dip below a linearization far above it: once, the dip
+                # linearized at the geometric-jerk feed instead (STALL_RECAP), before
+                # `_unstall`'s objectives and floors
+                dip = stall_dips(q, q_star, free & (q <= 1e-9 * float(np.max(hi))))
+                if dip.any():
+                    recapped = True
+                    q_star = np.where(dip, np.minimum(q_star, STALL_RECAP * geometric_jerk_cap(
+                        geo, lim.jmax, tight.jerk)), q_star)
+                    continue
             q = self._unstall(plan, weight, q, lo, hi, rows, pinned_q)
             t = grid_time(geo.s, q)
             plan.pass_times.append(t)
