@@ -114,11 +114,12 @@ def test_the_pocketing_program_plans_as_one_job(monkeypatch) -> None:
     # the distance objective, its pinned nodes linearized as before stop 43 (no extra
     # passes on LPs over 4000 nodes): its plan needs more rounds than the budget, the case
     # under test (the default, time-weighted objective needs 6; with the extra passes 5),
-    # with every repair round global (local rounds, `lp.local_repair`, need 4)
+    # with every repair round global (local rounds, `lp.local_repair`, need 4) and stalls
+    # lifted by `_unstall` alone (with `stall_recap` it needs 6)
     from lookahead.planning.lp import planner as lp_planner
 
     monkeypatch.setattr(lp_planner, "RELINEARIZE_MAX_NODES", 4000)
-    res = LPPlanner(objective="distance", local_repair=0).plan(req)
+    res = LPPlanner(objective="distance", local_repair=0, stall_recap=False).plan(req)
     smp = sample_plan(path, res.profile, m.dt)
     assert check_positions(smp.pos, m.limits, m.dt).violations == 0
     assert res.info["repairs"] > LPPlanner().max_repairs  # more than the old budget
