@@ -468,10 +468,13 @@ class LPPlanner:
     end, where the last plan's q no longer applies; tangents at the caps (~3x the feed a
     head accelerating out of a turnaround has) made the first jerk pass infeasible on 120
     of 1,186 frozen attempts of the 64 non-long corpus paths (engine-lp), each then re-solved
-    half-frozen; with the v+a solution 78 fail, engine-lp compute 175 -> 130 s (0.75x;
-    fiberpath programs 0.59-0.82x), winding geometric mean -0.01 % (cam-fp-hel25 -0.8 %,
-    cam-fp-hel45-D30 +0.7 %: its last window's repairs, which move +-0.7 % with the seam
-    passes alone). seam_passes: jerk passes of a seam plan's
+    half-frozen; with the v+a solution 78 fail, engine-lp compute 161 -> 131 s side by
+    side (0.81x; fiberpath programs 0.56-0.86x), winding geometric mean -0.01 %
+    (cam-fp-hel25 -0.8 %, cam-fp-hel45-D30 +0.7 %: its last window's repairs, which move
+    it as much with seam_passes 2-4 alone; `corpus_seam_va_pass_*.json`). None: on, except
+    for OSQP (its engine with this and `stall_recap` on the fast subset without the mill:
+    c-fourier-xc +17 % and 3.9x the compute, cam-style-R50 +5.9 %, n-butterfly -4.9 %;
+    `corpus_osqp_stop48_*.json`). seam_passes: jerk passes of a seam plan's
     first solve (None: `SEAM_PASSES`, except for OSQP: 1). seam_jerk_change: keep the
     jerk-change rows at a seam's first nodes (its head satisfies them). start_relief: nodes
     after a moving start that get the limits themselves (`_relieve_start`). brake_jerk: the jerk
@@ -494,7 +497,8 @@ class LPPlanner:
     issue 13's stop 47).
     stall_recap: a jerk pass that stalls in a dip far below its linearization point is
     solved once more with the dip linearized at the geometric-jerk feed (`stall_dips`,
-    `STALL_RECAP`) before `_unstall` (off: `_unstall` at once, as before stop 48).
+    `STALL_RECAP`) before `_unstall` (off: `_unstall` at once, as before stop 48; None:
+    on, except for OSQP, as `seam_va_pass`).
     """
 
     name = "lp"
@@ -514,7 +518,7 @@ class LPPlanner:
         zone_pad: int = 10,
         free_start_nodes: int = 3,
         reuse: bool = True,
-        seam_va_pass: bool = True,
+        seam_va_pass: bool | None = None,
         seam_passes: int | None = None,
         seam_jerk_change: bool = True,
         stall_floor: float = 0.1,
@@ -527,7 +531,7 @@ class LPPlanner:
         handover: bool = True,
         transient: Planner | None = None,
         local_repair: int | None = None,
-        stall_recap: bool = True,
+        stall_recap: bool | None = None,
     ) -> None:
         if objective not in OBJECTIVES:
             raise ValueError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
@@ -543,11 +547,11 @@ class LPPlanner:
         self._relaxed = 0  # nodes of the start zone at the limits themselves (0: none)
         self.stall_floor = stall_floor
         self.reuse = reuse
-        self.seam_va_pass = seam_va_pass
+        self.seam_va_pass = solver != "osqp" if seam_va_pass is None else seam_va_pass
         self.seam_passes = ((1 if solver == "osqp" else SEAM_PASSES) if seam_passes is None
                             else seam_passes)
         self.seam_jerk_change = seam_jerk_change
-        self.stall_recap = stall_recap
+        self.stall_recap = solver != "osqp" if stall_recap is None else stall_recap
         self._last: LastPlan | None = None
         self._corners: tuple[Path, float, np.ndarray] | None = None
         self._split: np.ndarray | None = None  # `_plan_cold`: split the grid near these s
