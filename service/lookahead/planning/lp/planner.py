@@ -288,18 +288,6 @@ VEL_CUT = 0.998
 #: the dwell layer through the engine, a seam linearized at the upper bounds left the
 #: nodes beside its dwell at 1-4 mm/s, intervals of 1-2.6 s, 18.0 s for a 6.7 s window)
 RELINEARIZE_RATIO = 10.0
-#: a jerk pass that stalls in a dip (`stall_dips`) is solved once more with q* there at most
-#: this times `geometric_jerk_cap`, before `_unstall`. Why: at the fiberpath programs'
-#: turnarounds the v+a solution is ~10x the q the jerk rows allow (q* 15,000 against
-#: ~1,700 mm^2/s^2 on cam-fp-hel45-D60), the first pass dips to q = 0 there, and
-#: `_unstall` took 5-6 solves to lift it: 122 such stalls on the 64 non-long paths, 16 s of
-#: the engine's 135 s compute. 1.0: the tangent there then admits up to 3x the cap, above
-#: the ~0.6x the turnarounds plan at. Side by side on the 64 non-long paths
-#: (`corpus_stall_recap_{before,after}.json`): engine-lp compute 0.92x, whole-job lp 0.76x,
-#: winding -0.02 % / -0.06 % (worst cam-fp-hel45-D60 +0.7 % / +2.1 %, best the dwell cone
-#: -1.7 %, cam-fp-cone's whole job -2.6 %). Capped everywhere, not only at a stall, the
-#: linearization slowed bends the LP passes above that feed: the polar dome +2.4 %.
-STALL_RECAP = 1.0
 RELINEARIZE_EXTRA = 2
 #: ... when the intervals next to such nodes take more than this fraction of the pass's
 #: travel time (trades compute for time: on the fast corpus every pass for a smaller
@@ -315,6 +303,20 @@ RELINEARIZE_SHARE = 0.02
 #: 2.8 % of its windowed plan instead of 30.5 % above it) for 1.1-6.5x the CPU (hoop-hel45
 #: 7 -> 47 s), the other 10 unchanged to 0.1 %
 RELINEARIZE_MAX_NODES: int | None = None
+#: a jerk pass that stalls in a dip (`stall_dips`) is solved once more with q* there at most
+#: this times `geometric_jerk_cap`, before `_unstall`. Why: at the fiberpath programs'
+#: turnarounds the v+a solution is ~10x the q the jerk rows allow (q* 15,000 against
+#: ~1,700 mm^2/s^2 on cam-fp-hel45-D60), the first pass dips to q = 0 there, and
+#: `_unstall` took 5-6 solves to lift it: 122 such stalls on the 64 non-long paths, 16 s of
+#: the engine's 135 s compute. 1.0: the tangent there then admits up to 3x the cap, above
+#: the ~0.6x D60's turnarounds plan at. Side by side on the 64 non-long paths
+#: (`corpus_stall_recap_{before,after}.json`): engine-lp compute 0.92x, whole-job lp 0.76x,
+#: winding -0.02 % / -0.06 % (worst cam-fp-hel45-D60 +0.7 % / +2.1 %, best the dwell cone
+#: -1.7 %, cam-fp-cone's whole job -2.6 %). Capped everywhere, not only at a stall, the
+#: linearization slowed bends the LP passes above that feed: the polar dome +2.4 %.
+STALL_RECAP = 1.0
+#: a free node at q at most this times the largest upper bound has stalled (`_unstall`)
+STALLED_SHARE = 1e-9
 
 
 def pinned_share(s: np.ndarray, q: np.ndarray, pinned: np.ndarray) -> float:
@@ -1235,11 +1237,12 @@ class LPPlanner:
                 # a stall in a dip below a linearization far above it: once, the dip
                 # linearized at the geometric-jerk feed instead (STALL_RECAP), before
                 # `_unstall`'s objectives and floors
-                dip = stall_dips(q, q_star, free & (q <= 1e-9 * float(np.max(hi))))
-                if dip.any():
+                dip = stall_dips(q, q_star, free & (q <= STALLED_SHARE * float(np.max(hi))))
+                capped = np.minimum(q_star, STALL_RECAP * geometric_jerk_cap(
+                    geo, lim.jmax, tight.jerk))
+                if np.any(dip & (capped < q_star)):  # else the same LP again
                     recapped = True
-                    q_star = np.where(dip, np.minimum(q_star, STALL_RECAP * geometric_jerk_cap(
-                        geo, lim.jmax, tight.jerk)), q_star)
+                    q_star = np.where(dip, capped, q_star)
                     continue
             q = self._unstall(plan, weight, q, lo, hi, rows, pinned_q)
             t = grid_time(geo.s, q)
@@ -1303,7 +1306,7 @@ class LPPlanner:
         it makes the LP infeasible (a floor is only tried, never imposed: before issue 13
         an infeasible floor failed the whole window). Returns the first solution
         without a stall, else the last one (the check then decides)."""
-        tiny = 1e-9 * float(np.max(q_hi))
+        tiny = STALLED_SHARE * float(np.max(q_hi))
         free = np.ones(q.size, dtype=bool)
         free[list(fixed)] = False
 
