@@ -1,7 +1,7 @@
 """Where the jerk rows are linearized (issue 13, stop 48).
 
 A seam plan linearizes the jerk rows of its fresh nodes at the velocity+acceleration LP's
-solution (`LPPlanner.seam_va_pass`, on by default since stop 48).
+solution (`LPPlanner.seam_va_pass`, on by default with HiGHS since stop 48).
 
 Before, they were linearized at their upper bounds. A frozen seam's fresh nodes begin about
 one braking distance before the last window's end, so the first of them sit right after a
