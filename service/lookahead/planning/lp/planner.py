@@ -1238,12 +1238,13 @@ class LPPlanner:
                 # linearized at the geometric-jerk feed instead (STALL_RECAP), before
                 # `_unstall`'s objectives and floors
                 dip = stall_dips(q, q_star, free & (q <= STALLED_SHARE * float(np.max(hi))))
-                capped = np.minimum(q_star, STALL_RECAP * geometric_jerk_cap(
-                    geo, lim.jmax, tight.jerk))
-                if np.any(dip & (capped < q_star)):  # else the same LP again
-                    recapped = True
-                    q_star = np.where(dip, capped, q_star)
-                    continue
+                if dip.any():
+                    capped = np.minimum(q_star, STALL_RECAP * geometric_jerk_cap(
+                        geo, lim.jmax, tight.jerk))
+                    if np.any(dip & (capped < q_star)):  # else the same LP again
+                        recapped = True
+                        q_star = np.where(dip, capped, q_star)
+                        continue
             q = self._unstall(plan, weight, q, lo, hi, rows, pinned_q)
             t = grid_time(geo.s, q)
             plan.pass_times.append(t)
