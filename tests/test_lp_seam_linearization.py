@@ -64,10 +64,12 @@ def test_seam_attempts_that_failed_with_tangents_at_the_caps_plan(
     assert row["violations"] == 0 and row["fallbacks"] == 0 and not row.get("failed")
     at_caps, row_at_caps = failed_seam_attempts(feed_program, monkeypatch,
                                                 seam_va_pass=False)
-    assert at_caps >= 3  # frozen, half-frozen and seam: the same infeasible LP
     assert row_at_caps["violations"] == 0  # the plan from scratch after them held
-    # 0 when measured; "fewer" keeps the test off the last bits of a CPU's floats
-    assert failed < at_caps
+    # whether the tangents at the caps make these LPs infeasible rests on a tiny slack,
+    # i.e. on the last bits of a CPU's floats: frozen, half-frozen and seam attempts (3)
+    # failed on the machine the change was measured on, none on another; with the v+a
+    # solution none failed on either
+    assert failed <= at_caps
 
 
 # --- a stalled jerk pass, re-linearized at its dip (`stall_dips`, `STALL_RECAP`) -----------
