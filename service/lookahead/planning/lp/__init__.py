@@ -12,6 +12,8 @@ Modules, each importing only the ones above it:
 - `seam`: where a replan continues the last plan.
 - `handover`: a moving start the LP cannot follow, handed over through the heuristic's
   transient to a state of zero path acceleration.
+- `rest_stretches`: the stretches between two rest points of a plan, which another
+  planner's faster plan may replace, and the replans that start on such a plan.
 - `planner`: `LPPlanner` (grid, LP passes, relaxation, check/repair loop).
 - `window`: `WindowedLP`, the whole-job driver that plans window by window.
 

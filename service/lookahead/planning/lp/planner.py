@@ -19,6 +19,12 @@ any grid (`lp.grid.near_reversals`) becomes a rest node, like a corner. A repair
 from converging gives up early (HOPELESS_RATIO); one that keeps making progress at new
 places (a long grid) gets more rounds (REPAIRS_PER_BUDGET).
 
+Between two rest points (corners, near-reversals, the job's start and end) the plan
+depends on nothing outside: such stretches of at most SPLICE_MAX_NODES nodes are planned by
+the transient planner too, whose plan replaces the LP's where it is faster and passes the
+same check (`rest_splice`, `lp.rest_stretches`: the LP's grid loses ~25 % on short
+jerk-dominated moves between stops, at any grid step).
+
 A feed cap (segment feeds, override) changes value at segment ends: each change is a
 node (`lp.grid.with_breaks`), the nodes beside it are as close in time at the lower cap
 as elsewhere at the top feed (`lp.grid.break_steps`), and every node keeps the smaller
@@ -76,6 +82,7 @@ from lookahead.limits import AxisLimits
 from lookahead.planning.base import (
     FeedCap,
     FeedProfile,
+    PathState,
     Planner,
     PlanningError,
     PlanRequest,
@@ -118,6 +125,15 @@ from lookahead.planning.lp.profile import (
     profile_from_grid,
 )
 from lookahead.planning.lp.release import start_release
+from lookahead.planning.lp.rest_stretches import (
+    Splice,
+    find_splice,
+    interior_worst,
+    node_times,
+    rest_spans,
+    splice_at,
+    swap_spans,
+)
 from lookahead.planning.lp.rows import (
     GridGeometry,
     Rows,
@@ -317,6 +333,13 @@ RELINEARIZE_MAX_NODES: int | None = None
 STALL_RECAP = 1.0
 #: a free node at q at most this times the largest upper bound has stalled (`_unstall`)
 STALLED_SHARE = 1e-9
+#: rest-to-rest stretches of more LP nodes than this are not planned by the transient
+#: planner (`rest_splice`; a compute bound: on the corpus's paths with rest points its
+#: plan won on stretches of 28-56 nodes (c-polyline-deg1-30's moves, c-near-cusp-bspline,
+#: c-short-winder-0p8mm, one of 34 on c-corners-bspline-3d-quintic) and lost on every one
+#: of 81-198 nodes (the B-spline corners, the cusp cycloids), at 0.1-0.8 s of compute each
+#: against the LP's 0.1-1 s for the whole path)
+SPLICE_MAX_NODES = 64
 
 
 def pinned_share(s: np.ndarray, q: np.ndarray, pinned: np.ndarray) -> float:
@@ -501,6 +524,10 @@ class LPPlanner:
     solved once more with the dip linearized at the geometric-jerk feed (`stall_dips`,
     `STALL_RECAP`) before `_unstall` (off: `_unstall` at once, as before stop 48; None:
     on, except for OSQP, as `seam_va_pass`).
+    rest_splice: each stretch between two rest points of a plan (`lp.rest_stretches`) is
+    planned by the transient planner too, and its plan replaces the LP's there where it is
+    faster and passes the LP's check; a replan starting on such a stretch keeps it up to
+    its end at rest and plans from there (off: the LP's plans only).
     """
 
     name = "lp"
@@ -534,6 +561,7 @@ class LPPlanner:
         transient: Planner | None = None,
         local_repair: int | None = None,
         stall_recap: bool | None = None,
+        rest_splice: bool = True,
     ) -> None:
         if objective not in OBJECTIVES:
             raise ValueError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
@@ -554,6 +582,10 @@ class LPPlanner:
                             else seam_passes)
         self.seam_jerk_change = seam_jerk_change
         self.stall_recap = solver != "osqp" if stall_recap is None else stall_recap
+        self.rest_splice = rest_splice
+        #: the rest-to-rest stretches planned by the transient planner, ahead of the last
+        #: request's start (`lp.rest_stretches`)
+        self._stretches: list[Splice] = []
         self._last: LastPlan | None = None
         self._corners: tuple[Path, float, np.ndarray] | None = None
         self._split: np.ndarray | None = None  # `_plan_cold`: split the grid near these s
@@ -591,6 +623,13 @@ class LPPlanner:
         windowed LP commits), then keeping half of that, then re-solving all but the
         seam's first interval; if all fail, the request is planned from scratch."""
         t0 = time.perf_counter()
+        splicing = self.rest_splice and fixed_head is None
+        kept = splice_at(self._stretches, request) if splicing else None
+        if kept is not None:
+            result = self._continue_splice(request, *kept)
+            if result is not None:
+                return PlanResult(result.profile, self.name, time.perf_counter() - t0,
+                                  result.info)
         seam = self.find_seam(request) if fixed_head is None and self.reuse else None
         result = None
         last = self._last
@@ -609,7 +648,95 @@ class LPPlanner:
                     raise
                 result = plan_handed_over(request, self._transient(), partial(
                     self._plan_released, fixed_head=None), exc)
+        if splicing:
+            result = self._splice_rests(request, result)
         return PlanResult(result.profile, self.name, time.perf_counter() - t0, result.info)
+
+    def _continue_splice(self, request: PlanRequest, kept: Splice, t: float
+                         ) -> PlanResult | None:
+        """A replan from time t of the kept stretch `kept`: the stretch's plan from there
+        to its end at rest, then a plan from rest there. None where the stretch's end is
+        no longer a rest of the request: the request ends there while moving, or goes on
+        past an end that was the end of the path received so far (a streamed job's next
+        segments came in; the request is then planned as any other)."""
+        head = slice_profile(kept.profile, t)
+        tol = 1e-12 * max(abs(kept.s1), 1.0)
+        if request.s_end <= kept.s1 + tol:
+            if request.v_end > REST:
+                return None
+            return PlanResult(head, self.name, 0.0, {"rest_splice": {"kept_from": t}})
+        h = self.grid_step or default_grid_step(request.path, request.limits)
+        if not np.any(np.abs(self.corners(request.path, h) - kept.s1) <= 1e-9 * max(
+                abs(kept.s1), 1.0)):
+            return None
+        rest = self.plan(replace(request, start=PathState(kept.s1)))
+        self._stretches.append(kept)  # that plan started past it: replans may start in it
+        info = dict(rest.info)
+        info["rest_splice"] = {**info.get("rest_splice", {}), "kept_from": t}
+        return PlanResult(concatenate([head, rest.profile]), self.name, 0.0, info)
+
+    def _splice_rests(self, request: PlanRequest, result: PlanResult) -> PlanResult:
+        """`result` with each rest-to-rest stretch of the LP's plan (`lp.rest_stretches`)
+        replaced by the transient planner's plan of it where that is faster and passes
+        the LP's check (`_checked_ratios`). The stretches planned are kept for replans:
+        those ahead of the request's start (`_stretches`)."""
+        last = self._last
+        ahead = [sp for sp in self._stretches if sp.s1 > request.start.s]
+        self._stretches = ahead
+        if (last is None or last.request.path is not request.path
+                or last.request.s_end != request.s_end):
+            return result  # e.g. a handed-over transient that is the whole plan
+        path_end = request.s_end >= request.path.length * (1.0 - 1e-12)
+        spans = rest_spans(last, last.request.start.v <= REST,
+                           request.v_end <= REST and path_end)
+        if not spans:
+            return result
+        times = node_times(last) + (result.profile.duration - last.profile.duration)
+        s_tol = 1e-9 * max(request.path.length, 1.0)
+        swaps, saved, fresh = [], 0.0, []
+        for i, j in spans:
+            t_a, t_b = float(times[i]), float(times[j])
+            if t_a < -1e-12:
+                continue  # before the request's start (a seam's first node)
+            s_a, s_b = float(last.geo.s[i]), float(last.geo.s[j])
+            s_at = result.profile.at(np.array([max(t_a, 0.0), t_b]))[0]
+            if abs(s_at[0] - s_a) > s_tol or abs(s_at[1] - s_b) > s_tol:
+                continue  # the result is not the LP plan's tail there
+            if j - i + 1 > SPLICE_MAX_NODES:
+                continue
+            sp = find_splice(ahead, request, s_a, s_b)
+            if sp is None:
+                sp = self._plan_stretch(request, last.geo.take(slice(i, j + 1)))
+                fresh.append(sp)
+            faster = sp.profile is not None and sp.profile.duration < t_b - t_a
+            if faster:
+                assert sp.profile is not None
+                swaps.append((max(t_a, 0.0), t_b, sp.profile))
+                saved += t_b - t_a - sp.profile.duration
+            fresh_or_kept = sp if sp.used == faster else replace(sp, used=faster)
+            self._stretches = [x for x in self._stretches if x is not sp] + [fresh_or_kept]
+        if not swaps:
+            return result
+        info = dict(result.info)
+        info["rest_splice"] = {"stretches": len(swaps), "saved_s": saved,
+                               "planned": len(fresh)}
+        return PlanResult(swap_spans(result.profile, swaps), self.name, 0.0, info)
+
+    def _plan_stretch(self, request: PlanRequest, geo: GridGeometry) -> Splice:
+        """The transient planner's plan of the rest-to-rest stretch over the nodes `geo`,
+        if it passes the LP's check (`_checked_ratios`) on those nodes."""
+        sub = PlanRequest(request.path, request.limits, PathState(float(geo.s[0])),
+                          float(geo.s[-1]), 0.0, request.feed_cap, request.dt)
+        try:
+            plan = self._transient().plan(sub)
+        except PlanningError:
+            return Splice(sub, geo, None)
+        if plan.info.get("verified") is False:
+            return Splice(sub, geo, None)
+        if interior_worst(self._checked_ratios(sub, plan.profile, geo),
+                          plan.profile.duration) > 1.0:
+            return Splice(sub, geo, None)
+        return Splice(sub, geo, plan.profile)
 
     def _transient(self) -> Planner:
         """The planner of a moving start's transient (`lp.handover`): the heuristic at the
@@ -792,6 +919,7 @@ class LPPlanner:
         """Drop the last plan and the solver's carried bases (the next request is planned
         from scratch, whatever was planned before)."""
         self._last = None
+        self._stretches = []
         for backend in (self.backend, self.zone_backend):
             forget = getattr(backend, "forget", None)
             if callable(forget):
@@ -918,19 +1046,7 @@ class LPPlanner:
             profile = slice_profile(full, t_cut) if t_cut > 0.0 else full
             if not self.verify:
                 break
-            ratios = analytic_ratios(request.path, profile, request.limits, geo,
-                                     self.check_step * request.dt)
-            if request.feed_cap is not None:
-                # the feed cap holds at the nodes only (q <= cap^2): between them the
-                # reconstruction overshot it by up to 3.4 % (the 20k-line program at F6000)
-                s_t, v_t = profile.at(ratios.t_vel)[:2]
-                ratios = replace(ratios, vel=np.maximum(
-                    ratios.vel, v_t / (request.feed_cap.at(s_t) * (1.0 + FEED_CAP_TOL))))
-            if knotty:
-                s_t, v_t = profile.at(ratios.t_jerk)[:2]
-                extra = knot_fd_ratio(request.path, request.limits, request.dt, s_t, v_t)
-                if extra is not None:
-                    ratios = replace(ratios, jerk=ratios.jerk + extra)
+            ratios = self._checked_ratios(request, profile, geo, knotty)
             if allowance is not None:
                 s_t = profile.at(ratios.t_vel)[0]
                 ratios = replace(ratios, vel=ratios.vel / np.interp(s_t, geo.s, allowance))
@@ -1034,6 +1150,29 @@ class LPPlanner:
         fresh = s[seam.n_reuse:]
         fresh = fresh[fresh <= last.request.s_end - brake]
         return np.concatenate([q, np.interp(fresh, last.geo.s, last.q)])
+
+    def _checked_ratios(self, request: PlanRequest, profile: FeedProfile, geo: GridGeometry,
+                        knotty: bool | None = None) -> SampledRatios:
+        """The sampled check of `profile` (from request.start.s) over the nodes `geo`:
+        axis velocity, acceleration and jerk over their limits (`analytic_ratios`), the
+        feed over the request's feed cap, the checker's extra jerk at C1 knots (`knotty`:
+        the path is C1; None: ask it)."""
+        ratios = analytic_ratios(request.path, profile, request.limits, geo,
+                                 self.check_step * request.dt)
+        if request.feed_cap is not None:
+            # the feed cap holds at the nodes only (q <= cap^2): between them the
+            # reconstruction overshot it by up to 3.4 % (the 20k-line program at F6000)
+            s_t, v_t = profile.at(ratios.t_vel)[:2]
+            ratios = replace(ratios, vel=np.maximum(
+                ratios.vel, v_t / (request.feed_cap.at(s_t) * (1.0 + FEED_CAP_TOL))))
+        if knotty is None:
+            knotty = request.path.continuity() < 2
+        if knotty:
+            s_t, v_t = profile.at(ratios.t_jerk)[:2]
+            extra = knot_fd_ratio(request.path, request.limits, request.dt, s_t, v_t)
+            if extra is not None:
+                ratios = replace(ratios, jerk=ratios.jerk + extra)
+        return ratios
 
     def corners(self, path: Path, h: float) -> np.ndarray:
         """The rest points: path.corners_s() and the near-reversals the grid of step h
