@@ -696,14 +696,12 @@ class LPPlanner:
         swaps, saved, fresh = [], 0.0, []
         for i, j in spans:
             t_a, t_b = float(times[i]), float(times[j])
-            if t_a < -1e-12:
-                continue  # before the request's start (a seam's first node)
+            if j - i + 1 > SPLICE_MAX_NODES or t_a < -1e-12:
+                continue  # too long, or before the request's start (a seam's first node)
             s_a, s_b = float(last.geo.s[i]), float(last.geo.s[j])
             s_at = result.profile.at(np.array([max(t_a, 0.0), t_b]))[0]
             if abs(s_at[0] - s_a) > s_tol or abs(s_at[1] - s_b) > s_tol:
                 continue  # the result is not the LP plan's tail there
-            if j - i + 1 > SPLICE_MAX_NODES:
-                continue
             sp = find_splice(ahead, request, s_a, s_b)
             if sp is None:
                 sp = self._plan_stretch(request, last.geo.take(slice(i, j + 1)))
@@ -713,8 +711,8 @@ class LPPlanner:
                 assert sp.profile is not None
                 swaps.append((max(t_a, 0.0), t_b, sp.profile))
                 saved += t_b - t_a - sp.profile.duration
-            fresh_or_kept = sp if sp.used == faster else replace(sp, used=faster)
-            self._stretches = [x for x in self._stretches if x is not sp] + [fresh_or_kept]
+            marked = sp if sp.used == faster else replace(sp, used=faster)
+            self._stretches = [x for x in self._stretches if x is not sp] + [marked]
         if not swaps:
             return result
         info = dict(result.info)
