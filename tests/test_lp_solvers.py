@@ -330,3 +330,17 @@ def test_osqp_rescue_solves_the_butterfly_first_jerk_pass():
     assert _worst_excess(A[hard], lo[hard], hi[hard], z) <= RESCUE_VIOLATION
     best = float(lp.cost @ (ref.q / lp.q_scale))
     assert float(lp.cost @ z) == pytest.approx(best, rel=3e-2)
+
+
+def test_each_solver_gets_its_own_defaults_and_explicit_settings_win() -> None:
+    from dataclasses import fields
+
+    from lookahead.planning.lp.planner import HIGHS_DEFAULTS, OSQP_DEFAULTS, LPPlanner
+
+    assert HIGHS_DEFAULTS != OSQP_DEFAULTS
+    for solver, table in (("highs", HIGHS_DEFAULTS), ("osqp", OSQP_DEFAULTS)):
+        planner = LPPlanner(solver=solver)
+        for f in fields(table):
+            assert getattr(planner, f.name) == getattr(table, f.name), (solver, f.name)
+    explicit = LPPlanner(solver="osqp", seam_va_pass=True, seam_passes=4, local_repair=7)
+    assert (explicit.seam_va_pass, explicit.seam_passes, explicit.local_repair) == (True, 4, 7)

@@ -342,6 +342,35 @@ STALLED_SHARE = 1e-9
 SPLICE_MAX_NODES = 64
 
 
+@dataclass(frozen=True)
+class SolverDefaults:
+    """The `LPPlanner` settings whose defaults (None arguments) differ between the
+    solvers; each is documented, with why OSQP differs, in `LPPlanner`'s docstring."""
+
+    local_repair: int
+    seam_va_pass: bool
+    seam_passes: int
+    stall_recap: bool
+    limit_curve_grid: bool
+    axis_jerk_change: bool
+
+
+#: HiGHS (highspy, scipy's HiGHS, "highs-milp"): the settings as measured on the corpus
+HIGHS_DEFAULTS = SolverDefaults(local_repair=LOCAL_REPAIR_REACH, seam_va_pass=True,
+                                seam_passes=SEAM_PASSES, stall_recap=True,
+                                limit_curve_grid=True, axis_jerk_change=False)
+#: OSQP: each setting as before the change that HiGHS got (with it, OSQP's ADMM did not
+#: converge, or planned slower: `LPPlanner`'s docstring says where)
+OSQP_DEFAULTS = SolverDefaults(local_repair=0, seam_va_pass=False, seam_passes=1,
+                               stall_recap=False, limit_curve_grid=False,
+                               axis_jerk_change=True)
+
+
+def solver_defaults(solver: str) -> SolverDefaults:
+    """The defaults of `solver` (`SolverDefaults`)."""
+    return OSQP_DEFAULTS if solver == "osqp" else HIGHS_DEFAULTS
+
+
 def pinned_share(s: np.ndarray, q: np.ndarray, pinned: np.ndarray) -> float:
     """Travel time (s) of the grid intervals with a pinned node at either end."""
     if not np.any(pinned):
@@ -524,6 +553,8 @@ class LPPlanner:
     solved once more with the dip linearized at the geometric-jerk feed (`stall_dips`,
     `STALL_RECAP`) before `_unstall` (off: `_unstall` at once, as before stop 48; None:
     on, except for OSQP, as `seam_va_pass`).
+    The settings above whose None default differs per solver are tabled in
+    `SolverDefaults` (HIGHS_DEFAULTS, OSQP_DEFAULTS).
     rest_splice: each stretch between two rest points of a plan (`lp.rest_stretches`) is
     planned by the transient planner too, and its plan replaces the LP's there where it is
     faster and passes the LP's check; a replan starting on such a stretch keeps it up to
@@ -567,8 +598,8 @@ class LPPlanner:
             raise ValueError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
         self.objective = objective
         self.handover = handover
-        self.local_repair = ((0 if solver == "osqp" else LOCAL_REPAIR_REACH)
-                             if local_repair is None else local_repair)
+        defaults = solver_defaults(solver)
+        self.local_repair = defaults.local_repair if local_repair is None else local_repair
         self.transient = transient
         self.start_relief = start_relief
         self.brake_jerk = brake_jerk
@@ -577,11 +608,10 @@ class LPPlanner:
         self._relaxed = 0  # nodes of the start zone at the limits themselves (0: none)
         self.stall_floor = stall_floor
         self.reuse = reuse
-        self.seam_va_pass = solver != "osqp" if seam_va_pass is None else seam_va_pass
-        self.seam_passes = ((1 if solver == "osqp" else SEAM_PASSES) if seam_passes is None
-                            else seam_passes)
+        self.seam_va_pass = defaults.seam_va_pass if seam_va_pass is None else seam_va_pass
+        self.seam_passes = defaults.seam_passes if seam_passes is None else seam_passes
         self.seam_jerk_change = seam_jerk_change
-        self.stall_recap = solver != "osqp" if stall_recap is None else stall_recap
+        self.stall_recap = defaults.stall_recap if stall_recap is None else stall_recap
         self.rest_splice = rest_splice
         #: the rest-to-rest stretches planned by the transient planner, ahead of the last
         #: request's start (`lp.rest_stretches`)
@@ -606,8 +636,9 @@ class LPPlanner:
         self.max_repairs = max_repairs
         self.margins = margins
         self.verify = verify
-        self.limit_curve_grid = solver != "osqp" if limit_curve_grid is None else limit_curve_grid
-        self.axis_jerk_change = (solver == "osqp" if axis_jerk_change is None
+        self.limit_curve_grid = (defaults.limit_curve_grid if limit_curve_grid is None
+                                 else limit_curve_grid)
+        self.axis_jerk_change = (defaults.axis_jerk_change if axis_jerk_change is None
                                  else axis_jerk_change)
 
     # --- public -----------------------------------------------------------------------
