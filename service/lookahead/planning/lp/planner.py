@@ -553,12 +553,12 @@ class LPPlanner:
     solved once more with the dip linearized at the geometric-jerk feed (`stall_dips`,
     `STALL_RECAP`) before `_unstall` (off: `_unstall` at once, as before stop 48; None:
     on, except for OSQP, as `seam_va_pass`).
-    The settings above whose None default differs per solver are tabled in
-    `SolverDefaults` (HIGHS_DEFAULTS, OSQP_DEFAULTS).
     rest_splice: each stretch between two rest points of a plan (`lp.rest_stretches`) is
     planned by the transient planner too, and its plan replaces the LP's there where it is
     faster and passes the LP's check; a replan starting on such a stretch keeps it up to
     its end at rest and plans from there (off: the LP's plans only).
+    The settings whose None default differs per solver are tabled in `SolverDefaults`
+    (HIGHS_DEFAULTS, OSQP_DEFAULTS).
     """
 
     name = "lp"
@@ -696,7 +696,7 @@ class LPPlanner:
             if request.v_end > REST:
                 return None
             return PlanResult(head, self.name, 0.0, {"rest_splice": {"kept_from": t}})
-        h = self.grid_step or default_grid_step(request.path, request.limits)
+        h = self._grid_step(request)
         if not np.any(np.abs(self.corners(request.path, h) - kept.s1) <= 1e-9 * max(
                 abs(kept.s1), 1.0)):
             return None
@@ -724,7 +724,7 @@ class LPPlanner:
             return result
         times = node_times(last) + (result.profile.duration - last.profile.duration)
         s_tol = 1e-9 * max(request.path.length, 1.0)
-        swaps, saved, fresh = [], 0.0, []
+        swaps, saved, planned = [], 0.0, 0
         for i, j in spans:
             t_a, t_b = float(times[i]), float(times[j])
             if j - i + 1 > SPLICE_MAX_NODES or t_a < -1e-12:
@@ -736,7 +736,7 @@ class LPPlanner:
             sp = find_splice(ahead, request, s_a, s_b)
             if sp is None:
                 sp = self._plan_stretch(request, last.geo.take(slice(i, j + 1)))
-                fresh.append(sp)
+                planned += 1
             faster = sp.profile is not None and sp.profile.duration < t_b - t_a
             if faster:
                 assert sp.profile is not None
@@ -748,7 +748,7 @@ class LPPlanner:
             return result
         info = dict(result.info)
         info["rest_splice"] = {"stretches": len(swaps), "saved_s": saved,
-                               "planned": len(fresh)}
+                               "planned": planned}
         return PlanResult(swap_spans(result.profile, swaps), self.name, 0.0, info)
 
     def _plan_stretch(self, request: PlanRequest, geo: GridGeometry) -> Splice:
@@ -781,7 +781,7 @@ class LPPlanner:
         """`_plan_cold`, after the closed-form release of a braking start that ends within
         one grid step (`lp.release`: the grid cannot follow it, its first quintic reversed);
         without it if there is none or the plan after it fails."""
-        h = self.grid_step or default_grid_step(request.path, request.limits)
+        h = self._grid_step(request)
         release = None if fixed_head is not None else start_release(
             request.path, request.limits, request.start, h, float(request.s_end), request.dt,
             self.corners(request.path, h))
@@ -837,7 +837,7 @@ class LPPlanner:
         if not length > 0.0:  # an empty window: refused by the grid, never refined
             raise PlanningError(f"lp: s_end {request.s_end} must exceed start.s "
                                 f"{request.start.s}")
-        h = self.grid_step or default_grid_step(request.path, request.limits)
+        h = self._grid_step(request)
         self._stuck_rule = True  # the first plan only (STUCK_REPEATS)
         try:
             return self._plan(request, fixed_head, None)
@@ -1203,6 +1203,11 @@ class LPPlanner:
                 ratios = replace(ratios, jerk=ratios.jerk + extra)
         return ratios
 
+    def _grid_step(self, request: PlanRequest) -> float:
+        """The nominal node spacing for `request` (path units): `grid_step`, else
+        `default_grid_step`."""
+        return self.grid_step or default_grid_step(request.path, request.limits)
+
     def corners(self, path: Path, h: float) -> np.ndarray:
         """The rest points: path.corners_s() and the near-reversals the grid of step h
         cannot resolve (`lp.grid.near_reversals`), cached for the last path object and h
@@ -1225,7 +1230,7 @@ class LPPlanner:
         reused = slice(seam.first, seam.first + seam.n_reuse)
         old_stops = last.stop_idx[(last.stop_idx > seam.first)
                                   & (last.stop_idx < seam.first + seam.n_reuse)] - seam.first
-        h = self.grid_step or default_grid_step(request.path, request.limits)
+        h = self._grid_step(request)
         corners = self.corners(request.path, h)
         if seam.reuses_all:  # the same end: no fresh nodes
             geo, stop_idx = last.geo.take(reused), old_stops
@@ -1260,7 +1265,7 @@ class LPPlanner:
         s0, s1 = float(request.start.s), float(request.s_end)
         if not s1 > s0:
             raise PlanningError(f"lp: s_end {s1} must exceed start.s {s0}")
-        h = grid_step or self.grid_step or default_grid_step(request.path, request.limits)
+        h = grid_step or self._grid_step(request)
         corners = self.corners(request.path, h)
         s, stop_idx = build_grid(s0, s1, h, request.start.v <= REST, request.v_end <= REST,
                                  corners)
