@@ -19,11 +19,14 @@ from lookahead.config import default_config
 from lookahead.geometry import fit_points
 from lookahead.limits import AxisLimits
 from lookahead.planning.base import PathState, PlanRequest
-from lookahead.planning.lp import LPPlanner
+from lookahead.planning.heuristic import plan_rest_to_rest
+from lookahead.planning.lp import LPPlanner, envelope
 from lookahead.planning.lp.envelope import (
     REST_CURVATURE_SHARE,
     local_rest_q,
+    lowered_rest_envelope,
     path_limits,
+    reachable_q,
     rest_envelope,
     tangent_limits,
 )
@@ -93,3 +96,72 @@ def test_a_rest_in_a_bend_keeps_the_conservative_envelope() -> None:
             near = rest_envelope(geo.s, 0.0, geo.d1, geo.d2, geo.d3, lim, scale, scale,
                                  (0.5 * v) ** 2)
             assert near is not None
+
+
+def _arc_with_a_slow_axis(radius: float) -> tuple:
+    """Three quarters of a circle of `radius` in X/Y, from rest to rest, while Z climbs 2 %
+    of the path: Z's limits are 1/200 of X's and Y's, so the path-level envelope limits
+    (any axis may carry the whole tangent) are Z's, 50 mm/s^2 and 1000 mm/s^3."""
+    theta = np.linspace(0.0, 1.5 * np.pi, 61)
+    points = np.column_stack([radius * np.sin(theta), radius * (1.0 - np.cos(theta)),
+                              0.02 * radius * theta])
+    path = fit_points(points, np.ones(3), "cubic")
+    lim = AxisLimits(vmax=np.array([500.0, 500.0, 5.0]), amax=np.array([1e4, 1e4, 50.0]),
+                     jmax=np.array([2e5, 2e5, 1000.0]))
+    return path, lim
+
+
+def test_a_rest_in_a_moderate_bend_follows_its_tangent_lowered_by_the_curvature(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A rest in a bend where the curvature terms at the tangent-only bound's feeds take
+    more than REST_CURVATURE_SHARE (R 20 mm: the centripetal term reaches 0.31 amax at
+    Z's feed limit 250 mm/s): `lowered_rest_envelope`, the bound with each node's limits
+    lowered by those terms, not the path-level envelope of the slow axis. Before, the
+    whole-job LP started and stopped at Z's 50 mm/s^2: 2.87 s against 0.58 s
+    (c-rand6-scales-raw's rests in bends, issue 13)."""
+    path, lim = _arc_with_a_slow_axis(20.0)
+    geo = GridGeometry.sample(path, np.linspace(0.0, path.length, 301))
+    scale = np.full(geo.s.size, 0.7)
+    q_top = 250.0**2
+    args = (geo.s, 0.0, geo.d1, geo.d2, geo.d3, lim, scale, scale, q_top)
+    assert rest_envelope(*args) is None  # the bend takes more than the share
+    a_path, j_path = path_limits(path, lim)
+    conservative = reachable_q(geo.s, 0.0, 0.0, 0.7 * j_path, a_path)
+    lowered = lowered_rest_envelope(*args, conservative)
+    assert lowered is not None
+    tangent_only = local_rest_q(geo.s, 0.0, geo.d1, lim, scale, scale)
+    near = tangent_only < q_top
+    assert np.all(lowered <= tangent_only * (1.0 + 1e-12))
+    assert np.any(lowered[near] < tangent_only[near])  # lowered where the bend is
+    assert np.all(lowered[near] >= conservative[near])
+    # where it would not lift the conservative envelope CURVED_REST_LIFT times: None
+    assert lowered_rest_envelope(*args, lowered / (0.5 * envelope.CURVED_REST_LIFT)) is None
+
+    def plan() -> tuple[float, int]:
+        request = PlanRequest(path, lim.scaled(0.98), PathState(0.0), path.length)
+        result = LPPlanner(rest_splice=False).plan(request)
+        report = check_positions(sample_plan(path, result.profile, 0.001).pos, lim, 0.001)
+        return result.profile.duration, report.violations
+
+    duration, violations = plan()
+    assert violations == 0
+    # the transient planner's whole job (its S-curves follow the tangent): 0.571 s
+    heuristic = plan_rest_to_rest(path, lim.scaled(0.98)).profile.duration
+    assert duration < 1.05 * heuristic
+
+    monkeypatch.setattr(envelope, "CURVED_REST_FLOOR", 2.0)  # no share is ever left
+    assert lowered_rest_envelope(*args, conservative) is None
+    before, violations = plan()
+    assert violations == 0
+    assert duration < 0.5 * before
+
+
+def test_a_rest_in_a_tight_bend_keeps_the_conservative_envelope_still() -> None:
+    """Where the lowered bound would leave less than CURVED_REST_FLOOR of the tangent's
+    limits (R 2 mm: the coupling alone exceeds Y's jerk limit at Z's feed limit), None."""
+    path, lim = _arc_with_a_slow_axis(2.0)
+    geo = GridGeometry.sample(path, np.linspace(0.0, path.length, 301))
+    scale = np.full(geo.s.size, 0.7)
+    args = (geo.s, 0.0, geo.d1, geo.d2, geo.d3, lim, scale, scale, 250.0**2)
+    assert rest_envelope(*args) is None
+    assert lowered_rest_envelope(*args, np.zeros(geo.s.size)) is None

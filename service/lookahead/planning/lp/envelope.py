@@ -192,6 +192,42 @@ def local_rest_q(s: np.ndarray, centre: float, tangents: np.ndarray, limits: Axi
 REST_CURVATURE_SHARE = 0.25
 
 
+#: `lowered_rest_envelope`: the share of a tangent limit that must be left beside the
+#: curvature terms at every node where the bound matters (below: a tight bend at the rest,
+#: the conservative envelope; the lowered limits are never below it). Trades how tight a
+#: bend may be against how far its limits may be lowered: c-rand6-scales-raw's whole-job
+#: LP 11.18 / 10.70 / 10.65 s at 0.1 / 0.25 / 0.5 (12.12 s without; stop 50) ...
+CURVED_REST_FLOOR = 0.25
+#: ... and how far (a factor on q) the lowered bound must lift the conservative envelope
+#: somewhere below the top feed to replace it. Trades the start out of a rest in a bend
+#: against the repairs a steeper start needs: on cam-fp-hel45-D30 a start lifted a little
+#: took one repair more whose tightening cost the first window 0.34 s (windowed +1.5 %,
+#: 1.0216x its whole job) at 1 (no gate). Measured on 6 changed corpus paths at 2 and 4
+#: (stop 50): 2 kept every gain but the one that cost, 4 only c-rand6-scales-raw's. At
+#: 0.25 and 2 on the 64 non-long paths (bench/results/corpus_curved_rest_{before,after}
+#: .json): lp 4 faster (c-rand6-scales-raw -11.7 %, c-fourier-xc -1.4 %, cam-style-R100
+#: -1.3 %, c-rand5 -0.6 %), engine-lp 3 faster, none slower, 0 failures
+CURVED_REST_LIFT = 2.0
+
+
+def _curvature_room(q: np.ndarray, a: np.ndarray, d1: np.ndarray, d2: np.ndarray,
+                    d3: np.ndarray, limits: AxisLimits) -> tuple[np.ndarray, np.ndarray]:
+    """Per node, the shares of the tangent-only path acceleration and jerk limits
+    (min_k amax_k / |x_s,k|, min_k jmax_k / |x_s,k|) left beside the curvature terms at
+    feed v = sqrt(q) and path acceleration a: min_k (amax_k - |x_ss,k| v^2) / |x_s,k| and
+    min_k (jmax_k - |x_sss,k| v^3 - 3 |x_ss,k| v a) / |x_s,k| over them (1 where no axis
+    moves along the tangent; negative where the terms alone exceed a limit)."""
+    v = np.sqrt(q)[:, None]
+    x1, x2, x3 = np.abs(d1), np.abs(d2), np.abs(d3)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a_tan = np.min(limits.amax / x1, axis=1)
+        j_tan = np.min(limits.jmax / x1, axis=1)
+        acc = np.min((limits.amax - x2 * v**2) / x1, axis=1) / a_tan
+        jerk = np.min((limits.jmax - x3 * v**3 - 3.0 * x2 * v * a[:, None]) / x1,
+                      axis=1) / j_tan
+    return np.where(np.isfinite(a_tan), acc, 1.0), np.where(np.isfinite(j_tan), jerk, 1.0)
+
+
 def rest_envelope(s: np.ndarray, centre: float, d1: np.ndarray, d2: np.ndarray,
                   d3: np.ndarray, limits: AxisLimits, jerk_scale: np.ndarray,
                   acc_scale: np.ndarray, q_top: float) -> np.ndarray | None:
@@ -199,10 +235,10 @@ def rest_envelope(s: np.ndarray, centre: float, d1: np.ndarray, d2: np.ndarray,
     at the bound's own feeds v (nodes where q < q_top, the highest q that matters), the
     curvature terms |x_ss| v^2 and |x_sss| v^3 + 3 |x_ss| v A (A: the bound's path
     acceleration) take at most REST_CURVATURE_SHARE of every axis's amax and jmax. None
-    where they take more (a bend near the rest): the caller keeps the conservative
-    envelope (`path_limits` / `envelope_limits`), which leaves them room; also where the
-    bound is undefined (NaN: a node whose tangent vanishes, a pchip knot where the fit
-    stops in every axis)."""
+    where they take more (a bend near the rest): the caller then tries
+    `lowered_rest_envelope`, else keeps the conservative envelope (`path_limits` /
+    `envelope_limits`), which leaves them room; also where the bound is undefined (NaN: a
+    node whose tangent vanishes, a pchip knot where the fit stops in every axis)."""
     q, a = _rest_bound(s, centre, d1, limits, jerk_scale, acc_scale)
     if np.any(np.isnan(q)):
         return None
@@ -215,3 +251,35 @@ def rest_envelope(s: np.ndarray, centre: float, d1: np.ndarray, d2: np.ndarray,
         if max(acc, jerk) > REST_CURVATURE_SHARE:
             return None
     return q
+
+
+def lowered_rest_envelope(s: np.ndarray, centre: float, d1: np.ndarray, d2: np.ndarray,
+                          d3: np.ndarray, limits: AxisLimits, jerk_scale: np.ndarray,
+                          acc_scale: np.ndarray, q_top: float, conservative: np.ndarray
+                          ) -> np.ndarray | None:
+    """For a rest in a bend (`rest_envelope` None): `local_rest_q` with each node's limits
+    lowered by what the curvature terms take at the tangent-only bound's feeds
+    (`_curvature_room`; one step, conservative: the lowered bound's feeds, and so its
+    terms, are smaller), where that leaves at least CURVED_REST_FLOOR of the tangent's
+    limits at every node where q < q_top and lifts the `conservative` envelope (q per
+    node) more than CURVED_REST_LIFT times at a node where that is below q_top; else None.
+
+    Why: c-rand6-scales-raw rests in bends whose axes allow ~14,000 mm/s^2 along the
+    tangent, and the conservative envelope held its starts to 960 mm/s^2 (the window's
+    worst tangent)."""
+    q, a = _rest_bound(s, centre, d1, limits, jerk_scale, acc_scale)
+    if np.any(np.isnan(q)):
+        return None
+    acc_room, jerk_room = _curvature_room(np.minimum(q, q_top), a, d1, d2, d3, limits)
+    near = q < q_top
+    if np.any(near) and min(np.min(acc_room[near]), np.min(jerk_room[near])) < \
+            CURVED_REST_FLOOR:
+        return None
+    bound = _rest_bound(s, centre, d1, limits,
+                        jerk_scale * np.maximum(jerk_room, CURVED_REST_FLOOR),
+                        acc_scale * np.maximum(acc_room, CURVED_REST_FLOOR))[0]
+    below = conservative < q_top
+    if np.any(np.isnan(bound)) or not np.any(bound[below] > CURVED_REST_LIFT *
+                                             conservative[below]):
+        return None
+    return bound

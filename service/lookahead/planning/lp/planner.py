@@ -94,6 +94,7 @@ from lookahead.planning.lp.envelope import (
     braking_q,
     envelope_limits,
     local_rest_q,
+    lowered_rest_envelope,
     path_limits,
     reachable_q,
     rest_envelope,
@@ -476,6 +477,12 @@ def start_limits(geo: GridGeometry, limits: AxisLimits) -> tuple[float, float]:
     return tangent_limits(np.abs(geo.d1[0]), limits)
 
 
+def _at_path_end(request: PlanRequest) -> bool:
+    """Whether the request's window ends where its path does (not a window's provisional
+    end inside the path received so far)."""
+    return request.s_end >= request.path.length * (1.0 - 1e-12)
+
+
 def default_grid_step(path: Path, limits: AxisLimits, interval_s: float = 0.0045) -> float:
     """Grid spacing: the distance covered in `interval_s` at the fastest feed the axis
     velocity limits could allow (path units)."""
@@ -717,9 +724,8 @@ class LPPlanner:
         if (last is None or last.request.path is not request.path
                 or last.request.s_end != request.s_end):
             return result  # e.g. a handed-over transient that is the whole plan
-        path_end = request.s_end >= request.path.length * (1.0 - 1e-12)
         spans = rest_spans(last, last.request.start.v <= REST,
-                           request.v_end <= REST and path_end)
+                           request.v_end <= REST and _at_path_end(request))
         if not spans:
             return result
         times = node_times(last) + (result.profile.duration - last.profile.duration)
@@ -1653,11 +1659,15 @@ class LPPlanner:
             return (self.envelope_jerk * J * float(np.min(tight.jerk[near])),
                     A * float(np.min(tight.acc[near])))
 
-        def rest(centre: float) -> np.ndarray:
-            local = rest_envelope(s, centre, geo.d1, geo.d2, geo.d3, request.limits,
-                                  self.envelope_jerk * tight.jerk, tight.acc, q_top)
-            return local if local is not None else reachable_q(np.abs(s - centre), 0.0,
-                                                               0.0, *factors(centre))
+        def rest(centre: float, lowered: bool = True) -> np.ndarray:
+            args = (s, centre, geo.d1, geo.d2, geo.d3, request.limits,
+                    self.envelope_jerk * tight.jerk, tight.acc, q_top)
+            local = rest_envelope(*args)
+            if local is not None:
+                return local
+            conservative = reachable_q(np.abs(s - centre), 0.0, 0.0, *factors(centre))
+            bound = lowered_rest_envelope(*args, conservative) if lowered else None
+            return conservative if bound is None else bound
 
         a0 = request.start.a
         env = np.full(s.size, np.inf)
@@ -1677,7 +1687,10 @@ class LPPlanner:
             env = np.minimum(env, reachable_q(s[-1] - s, request.v_end, 0.0,
                                               *factors(s[-1])))
         else:
-            env = np.minimum(env, rest(s[-1]))
+            # a window's provisional end keeps the conservative envelope in a bend (with
+            # the lowered bound there the windows braked later and their replans lost:
+            # engine-lp cam-style-R50 +1.0 %, c-fourier-xc +0.7 %; stop 50)
+            env = np.minimum(env, rest(s[-1], lowered=_at_path_end(request)))
         for i in stop_idx:
             env = np.minimum(env, rest(s[i]))
         return env
