@@ -1646,8 +1646,10 @@ class LPPlanner:
         before a rest end and around interior stops (`lp.envelope`). Around a rest (a
         start at rest, a rest end, the stops) at the tangents there where they bound the
         motion (`lp.envelope.rest_envelope`: a C-dominated stroke of the winder started
-        at X's 2000 mm/s^2 where its axes allow 5244); from a moving start, into a moving
-        end and around a rest in a bend at `envelope_limits`."""
+        at X's 2000 mm/s^2 where its axes allow 5244); around a rest in a bend at the
+        tangent's limits lowered by the curvature terms where that lifts the conservative
+        envelope (`lp.envelope.lowered_rest_envelope`; not at a window's provisional end);
+        from a moving start, into a moving end and elsewhere at `envelope_limits`."""
         A, J = envelope_limits(geo.d1, request.path.path_scale, request.limits)
         s = geo.s
         q_top = float(np.max(velocity_caps(geo, request.limits.vmax)))
