@@ -30,7 +30,7 @@ from lookahead.planning.lp.envelope import (
     rest_envelope,
     tangent_limits,
 )
-from lookahead.planning.lp.rows import GridGeometry
+from lookahead.planning.lp.rows import GridGeometry, Tightening
 from lookahead.sampling import sample_plan
 from motion_bounds import rest_to_rest_duration
 
@@ -98,11 +98,12 @@ def test_a_rest_in_a_bend_keeps_the_conservative_envelope() -> None:
             assert near is not None
 
 
-def _arc_with_a_slow_axis(radius: float) -> tuple:
-    """Three quarters of a circle of `radius` in X/Y, from rest to rest, while Z climbs 2 %
-    of the path: Z's limits are 1/200 of X's and Y's, so the path-level envelope limits
-    (any axis may carry the whole tangent) are Z's, 50 mm/s^2 and 1000 mm/s^3."""
-    theta = np.linspace(0.0, 1.5 * np.pi, 61)
+def _arc_with_a_slow_axis(radius: float, turns: float = 0.75) -> tuple:
+    """`turns` (default three quarters) of a circle of `radius` in X/Y, from rest to rest,
+    while Z climbs 2 % of the path: Z's limits are 1/200 of X's and Y's, so the path-level
+    envelope limits (any axis may carry the whole tangent) are Z's, 50 mm/s^2 and 1000
+    mm/s^3."""
+    theta = np.linspace(0.0, 2.0 * np.pi * turns, round(80 * turns) + 1)
     points = np.column_stack([radius * np.sin(theta), radius * (1.0 - np.cos(theta)),
                               0.02 * radius * theta])
     path = fit_points(points, np.ones(3), "cubic")
@@ -165,3 +166,23 @@ def test_a_rest_in_a_tight_bend_keeps_the_conservative_envelope_still() -> None:
     args = (geo.s, 0.0, geo.d1, geo.d2, geo.d3, lim, scale, scale, 250.0**2)
     assert rest_envelope(*args) is None
     assert lowered_rest_envelope(*args, np.zeros(geo.s.size)) is None
+
+
+def test_a_windows_provisional_end_in_a_bend_keeps_the_conservative_envelope() -> None:
+    """The lowered envelope is for rests: the path's end, not a window's provisional end
+    inside the path (there the windows braked later and their replans lost: engine-lp
+    cam-style-R50 +1.0 %). The same bend ends a whole path (lowered) and a window of a
+    path that goes on (conservative): 2 mm before the end the bound differs > 2x."""
+    whole, lim = _arc_with_a_slow_axis(20.0)
+    longer, _ = _arc_with_a_slow_axis(20.0, turns=1.5)
+    planner = LPPlanner()
+    ends = []
+    for path in (whole, longer):
+        s_end = whole.length
+        geo = GridGeometry.sample(path, np.linspace(0.0, s_end, 301))
+        request = PlanRequest(path, lim, PathState(0.0), s_end)
+        tight = Tightening.uniform(geo.s.size, *planner.margins)
+        env = planner._envelope(request, geo, tight, np.array([], dtype=int))
+        ends.append(float(np.interp(s_end - 2.0, geo.s, env)))
+    assert longer.length > 1.9 * whole.length  # the window ends inside the longer path
+    assert ends[0] > 2.0 * ends[1]
