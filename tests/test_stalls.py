@@ -4,10 +4,13 @@ collections and where the other threads are."""
 from __future__ import annotations
 
 import gc
+import os
 import threading
 import time
 
 from lookahead.stalls import StallProbe, thread_places
+
+TESTS = os.path.dirname(os.path.abspath(__file__))
 
 
 def _parked(go: threading.Event) -> None:
@@ -37,9 +40,9 @@ def test_the_account_names_where_another_thread_is() -> None:
     try:
         deadline = time.monotonic() + 5.0
         while time.monotonic() < deadline and not any(
-                "(_parked)" in p for p in thread_places("tests")):
+                "(_parked)" in p for p in thread_places(TESTS)):
             time.sleep(0.01)
-        places = [p for p in thread_places("tests") if p.startswith("planner_0 at ")]
+        places = [p for p in thread_places(TESTS) if p.startswith("planner_0 at ")]
         # innermost in threading (the Event's wait), and where this package's code called it
         assert places and "(wait) in " in places[0] and "(_parked)" in places[0]
         assert not any(p.startswith("planner_0") for p in thread_places())  # not lookahead's

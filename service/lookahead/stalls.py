@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import collections
 import gc
+import os
 import sys
 import threading
 import time
@@ -19,8 +20,10 @@ import traceback
 
 #: collections remembered (a late batch looks back over the last ones)
 GC_MEMORY = 64
-#: the package whose threads are described
-PACKAGE = "lookahead"
+#: the folder whose threads are described: this package's own (a folder *name* matched in
+#: the paths also took every file of a checkout whose own folder is named lookahead/, as
+#: `git clone` names it: tests/test_stalls.py failed in such a clone)
+PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__))
 
 
 class StallProbe:
@@ -78,11 +81,12 @@ class StallProbe:
         return "; ".join(parts)
 
 
-def thread_places(package: str = PACKAGE) -> list[str]:
+def thread_places(folder: str = PACKAGE_DIR) -> list[str]:
     """'name at file:line (function) in lookahead/...:line (function)' for every thread
-    but the caller's that runs code of `package` (a folder name in its files' paths): its
-    innermost frame and, if that is elsewhere (numpy, scipy, a lock), the innermost one of
-    `package`."""
+    but the caller's that runs code in `folder` (a directory; default this package's): its
+    innermost frame and, if that is elsewhere (numpy, scipy, a lock), the innermost one in
+    `folder`."""
+    prefix = os.path.join(os.path.abspath(folder), "")
     me = threading.get_ident()
     names = {t.ident: t.name for t in threading.enumerate()}
     out = []
@@ -90,7 +94,7 @@ def thread_places(package: str = PACKAGE) -> list[str]:
         if ident == me:
             continue
         stack = traceback.extract_stack(frame)
-        ours = [fs for fs in stack if f"/{package}/" in fs.filename.replace("\\", "/")]
+        ours = [fs for fs in stack if fs.filename.startswith(prefix)]
         if not ours:
             continue  # a thread of the bus library or the caller's program
         where = _frame(stack[-1])
