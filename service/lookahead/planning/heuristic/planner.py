@@ -91,12 +91,16 @@ from lookahead.planning.profile_ops import concatenate, slice_profile
 #: repair step: factor on V, A, J of a segment that fails verification (0.85: 1-3 rounds on
 #: the tubes, Fourier and random wandering paths of tests/heuristic_paths.py)
 REPAIR_STEP = 0.85
-#: repair rounds a further layout gets once one has a verified profile (a compute bound:
-#: from a replan's moving start a layout that does not suit it failed all 12 rounds on
-#: the tubes, while 1 round sufficed in every winning case measured; 1 instead of 2: the
-#: same whole-job plans on the 59 non-long corpus paths and the same windowed plans on 4
-#: fast-corpus paths, fast set 0.86 s CPU instead of 1.14)
-OTHER_LAYOUT_ROUNDS = 1
+#: repair rounds a further layout gets once one has a verified profile; each round's
+#: profile that is no faster than that one ends the layout unverified (`_CannotWinError`:
+#: repairs only slow a profile down). A compute bound: from a replan's moving start a
+#: layout that does not suit it failed all 12 rounds on the tubes. 2 since stop 50, side
+#: by side with 1 on the 64 non-long paths (bench/results/corpus_heuristic_rounds2_{before,
+#: after}.json): n-heart -4.8 % (its wide layout verifies in round 2 and wins), engine
+#: cam-style-R100 -0.5 %, nothing slower; compute whole job 39.7 -> 38.5 s, engine
+#: 160.7 -> 161.3 s. Without the check in every round, 2 rounds cost the engine +7.7 %
+#: (corpus_heuristic_other_rounds_{1,2}.json)
+OTHER_LAYOUT_ROUNDS = 2
 #: repair rounds per layout in the first pass over the layouts (a compute bound: from a
 #: cold replan braking on the butterfly the coarse layout failed all 12 rounds, 1.55 s,
 #: while the wide one verified in 1; the winning layout needed 1 round in every case
@@ -632,9 +636,9 @@ class HeuristicPlanner:
                      merge: bool = True, beat: float | None = None) -> tuple[Phases, dict]:
         """Segments, S-curves, verification and repair from a start within the limits
         (`merge`: see `_profile_phases`). `beat` (s): the duration of the best verified
-        profile so far; a last round's profile that does not beat it raises
-        `_CannotWinError` unverified (verification costs as much as a plan on short
-        windows, and the caller keeps only a faster profile)."""
+        profile so far; a round's profile that does not beat it raises `_CannotWinError`
+        unverified (verification costs as much as a plan on short windows, the caller
+        keeps only a faster profile, and a repair round only slows a profile down)."""
         shares = layout.shares
         starts = choose_segments(grid, vlim, layout.band_ratio)
         if layout.split is not None:
@@ -658,8 +662,7 @@ class HeuristicPlanner:
             starts = new_starts
             fixed = self._fixed if free else None
             info["zero_junction_rounds"] += int(not free)
-            if beat is not None and round_ == rounds - 1 and \
-                    not float(np.sum(phases.duration)) < beat:
+            if beat is not None and not float(np.sum(phases.duration)) < beat:
                 raise _CannotWinError("heuristic: layout no faster than the best one")
             profile = build_profile(phases)
             failing = failing_segments(profile, grid, starts, request.limits,
