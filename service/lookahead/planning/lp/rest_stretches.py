@@ -22,15 +22,17 @@ from itertools import pairwise
 
 import numpy as np
 
-from lookahead.planning.base import FeedProfile, PlanRequest
+from lookahead.planning.base import FeedProfile, PathState, PlanRequest
 from lookahead.planning.lp.rows import GridGeometry
-from lookahead.planning.lp.seam import REST, LastPlan, same_stretch, time_at
+from lookahead.planning.lp.seam import (
+    REST,
+    LastPlan,
+    same_request_over,
+    state_agrees,
+    time_at,
+)
 from lookahead.planning.profile_ops import concatenate, slice_profile
 from lookahead.planning.sampled_check import SampledRatios
-
-#: a replan's start state agrees with a kept stretch's plan if its feed and path
-#: acceleration differ by at most this, relative to 1 + the stretch's peak (as `find_seam`)
-STATE_TOL = 1e-7
 
 
 @dataclass(frozen=True)
@@ -101,29 +103,21 @@ def interior_worst(ratios: SampledRatios, duration: float) -> float:
     return np.inf if any(np.isnan(p) for p in peaks) else max(peaks)
 
 
-def state_matches(profile: FeedProfile, t: float, v: float, a: float) -> bool:
-    """True if `profile` at time t has feed v and path acceleration a (to STATE_TOL)."""
+def state_matches(profile: FeedProfile, t: float, start: PathState) -> bool:
+    """True if `profile` at time t is in the state `start` (`seam.state_agrees`, relative
+    to the profile's peaks at its knots)."""
     pp = profile.s_of_t
     knots = pp.x
     v_scale = float(np.max(np.abs(pp.derivative()(knots))))
     a_scale = float(np.max(np.abs(pp.derivative(2)(knots))))
     _, v_t, a_t, _ = profile.at(np.array([t]))[:, 0]
-    return (abs(v_t - v) <= STATE_TOL * (1.0 + v_scale)
-            and abs(a_t - a) <= STATE_TOL * (1.0 + a_scale))
+    return state_agrees(start, v_t, a_t, v_scale, a_scale)
 
 
 def applies(sp: Splice, request: PlanRequest) -> bool:
     """True if `sp` was planned for what `request` asks over the stretch: the same dt and
     limits, the same feed cap and path at the stretch's nodes."""
-    old = sp.request
-    if request.dt != old.dt or not request.limits.same_as(old.limits):
-        return False
-    if (request.feed_cap is None) != (old.feed_cap is None):
-        return False
-    if request.feed_cap is not None and old.feed_cap is not None and not np.array_equal(
-            request.feed_cap.at(sp.geo.s), old.feed_cap.at(sp.geo.s)):
-        return False
-    return same_stretch(old.path, request.path, sp.geo, slice(0, sp.geo.n_nodes))
+    return same_request_over(sp.request, request, sp.geo, slice(0, sp.geo.n_nodes))
 
 
 def find_splice(splices: list[Splice], request: PlanRequest, s0: float, s1: float
@@ -151,6 +145,6 @@ def splice_at(splices: list[Splice], request: PlanRequest) -> tuple[Splice, floa
         k = int(np.searchsorted(pp(pp.x), start.s, side="right")) - 1
         k = min(max(k, 0), pp.x.size - 2)
         t = time_at(sp.profile, k, start.s)
-        if t is not None and state_matches(sp.profile, t, start.v, start.a):
+        if t is not None and state_matches(sp.profile, t, start):
             return sp, t
     return None

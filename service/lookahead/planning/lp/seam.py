@@ -17,7 +17,7 @@ import numpy as np
 from scipy.interpolate import PPoly
 
 from lookahead.geometry.base import Path
-from lookahead.planning.base import FeedProfile, PlanRequest
+from lookahead.planning.base import FeedProfile, PathState, PlanRequest
 from lookahead.planning.lp.envelope import braking_distance, path_limits
 from lookahead.planning.lp.rows import GridGeometry, Tightening, velocity_caps
 from lookahead.planning.profile_ops import concatenate
@@ -30,6 +30,9 @@ FIXED_NODES = 3
 #: differ by at most this, relative to (1 + |value|) (the streaming fit's final part is
 #: bit-identical; a composite of the same pieces rounds its arc-length offsets)
 AGREE_TOL = 1e-9
+#: a replan's start state is a state of an earlier plan if its feed and path acceleration
+#: differ by at most this, relative to 1 + that plan's peak feed and acceleration
+STATE_TOL = 1e-7
 
 
 @dataclass
@@ -83,8 +86,6 @@ def find_seam(last: LastPlan | None, request: PlanRequest) -> Seam | None:
     if last is None or start.v <= REST:
         return None
     old = last.request
-    if request.dt != old.dt or not request.limits.same_as(old.limits):
-        return None
     s = last.geo.s
     i = int(np.searchsorted(s, start.s, side="right")) - 1
     if i < 0 or i >= s.size - 1:
@@ -94,10 +95,8 @@ def find_seam(last: LastPlan | None, request: PlanRequest) -> Seam | None:
         return None
     _, v, a, _ = last.profile.at(np.array([t_cut]))[:, 0]
     t_cut -= float(last.profile.s_of_t.x[i] - last.profile.s_of_t.x[0])
-    v_scale = float(np.sqrt(np.max(last.q)))
-    a_scale = float(np.max(np.abs(last.a)))
-    if (abs(v - start.v) > 1e-7 * (1.0 + v_scale)
-            or abs(a - start.a) > 1e-7 * (1.0 + a_scale)):
+    if not state_agrees(start, v, a, float(np.sqrt(np.max(last.q))),
+                        float(np.max(np.abs(last.a)))):
         return None
     if (abs(request.s_end - old.s_end) <= 1e-12 * max(abs(old.s_end), 1.0)
             and request.v_end == old.v_end):
@@ -112,14 +111,31 @@ def find_seam(last: LastPlan | None, request: PlanRequest) -> Seam | None:
         if i + n_reuse >= s.size or s[i + n_reuse - 1] >= request.s_end:
             return None
     reused = slice(i, i + n_reuse)
-    if request.feed_cap is not None or old.feed_cap is not None:
-        nodes = s[reused]
-        if (request.feed_cap is None or old.feed_cap is None
-                or not np.array_equal(request.feed_cap.at(nodes), old.feed_cap.at(nodes))):
-            return None
-    if not same_stretch(old.path, request.path, last.geo, reused):
+    if not same_request_over(old, request, last.geo, reused):
         return None
     return Seam(last, i, n_reuse, t_cut)
+
+
+def state_agrees(start: PathState, v: float, a: float, v_scale: float, a_scale: float
+                 ) -> bool:
+    """True if `start` has feed v and path acceleration a to STATE_TOL, relative to 1 +
+    the peaks `v_scale`, `a_scale` of the plan they come from."""
+    return (abs(v - start.v) <= STATE_TOL * (1.0 + v_scale)
+            and abs(a - start.a) <= STATE_TOL * (1.0 + a_scale))
+
+
+def same_request_over(old: PlanRequest, new: PlanRequest, geo: GridGeometry,
+                      nodes: slice) -> bool:
+    """True if `new` asks what `old` asked over the `nodes` of `geo`: the same dt and
+    limits, the same feed cap (or none) and path there."""
+    if new.dt != old.dt or not new.limits.same_as(old.limits):
+        return False
+    if new.feed_cap is not None or old.feed_cap is not None:
+        s = geo.s[nodes]
+        if (new.feed_cap is None or old.feed_cap is None
+                or not np.array_equal(new.feed_cap.at(s), old.feed_cap.at(s))):
+            return False
+    return same_stretch(old.path, new.path, geo, nodes)
 
 
 def same_stretch(old: Path, new: Path, geo: GridGeometry, nodes: slice) -> bool:
