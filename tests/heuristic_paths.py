@@ -126,6 +126,16 @@ def random_walk(seed: int, naxes: int, npoints: int, log_step: float, log_spread
     return built
 
 
+def pchip_cusp() -> tuple[Path, AxisLimits]:
+    """An XY path (mm) through 7 points fitted pchip, with one cusp: at (25, 10) both
+    axes reverse, so the fit's tangent vanishes there (a corner, `Path.corners_s`); its
+    other knots are C1. Limits of an ordinary XY table."""
+    pts = np.array([[0, 0], [10, 4], [25, 10], [12, 6], [4, 14], [10, 22], [3, 30.0]])
+    path = fit_points(pts, np.ones(2), "pchip")
+    return path, AxisLimits(np.array([100.0, 150.0]), np.array([1000.0, 2000.0]),
+                            np.array([2e4, 3e4]))
+
+
 def near_zero_cap(path: Path) -> FeedCap:
     """A feed cap with two stretches at a crawl (1 mm at 0.2 mm/s, 10 mm at 2 mm/s: 5 s
     each) and a high rest."""

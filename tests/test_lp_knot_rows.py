@@ -9,11 +9,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from heuristic_paths import random_walk
+from heuristic_paths import pchip_cusp, random_walk
 from lookahead.checker import check_positions
 from lookahead.planning.base import PathState, PlanRequest
+from lookahead.planning.heuristic import HeuristicPlanner
 from lookahead.planning.lp import LPPlanner
-from lookahead.planning.lp.knots import knot_jumps
+from lookahead.planning.lp.knots import c1_knot_caps, knot_jumps, knot_jumps_between
 from lookahead.planning.lp.rows import GridGeometry, jerk_rows, knot_tangent_point
 from lookahead.sampling import sample_plan
 
@@ -54,3 +55,23 @@ def test_the_fuzzed_pchip_walk_plans_whole_job_within_the_limits(pchip_walk):
     result = LPPlanner().plan(request)
     report = check_positions(sample_plan(path, result.profile, DT).pos, limits, DT)
     assert report.ok, report.first
+
+
+def test_a_cusp_is_a_stop_not_a_c1_knot() -> None:
+    """At a pchip cusp (both axes reverse: the fit's tangent vanishes, a corner) the LP
+    reads no x_ss jump: the feed is 0 there, and the one-sided x_ss is not finite. Read
+    as a knot, its cap held the two nodes either side at 5.6e-4 mm/s and the whole-job
+    plan took 5.73 s (stop 51), against the heuristic's 1.82."""
+    path, limits = pchip_cusp()
+    (corner,) = path.corners_s()
+    found = knot_jumps_between(path, 0.0, path.length)
+    assert found is not None and found[0].size == path.breakpoints_s().size - 3
+    assert not np.any(np.isclose(found[0], corner))
+    s = np.sort(np.concatenate([np.linspace(0.0, path.length, 400), [corner]]))
+    i = int(np.searchsorted(s, corner))
+    assert np.all(np.isinf(c1_knot_caps(path, s, limits, DT)[i - 2:i + 3]))
+    request = PlanRequest(path, limits.scaled(0.95), PathState(0.0), path.length, dt=DT)
+    lp = LPPlanner().plan(request)
+    heuristic = HeuristicPlanner().plan(request)
+    assert check_positions(sample_plan(path, lp.profile, DT).pos, limits, DT).ok
+    assert lp.profile.duration <= 1.05 * heuristic.profile.duration

@@ -33,12 +33,21 @@ KNOT_SIDE_DU = 1e-9
 
 def knot_jumps_between(path: Path, lo: float, hi: float
                        ) -> tuple[np.ndarray, np.ndarray] | None:
-    """(knots, |jump of x_ss| per knot and axis) of the C1 knots strictly inside (lo, hi);
-    None on a C2 path or when there is none."""
+    """(knots, |jump of x_ss| per knot and axis) of the C1 knots strictly inside (lo, hi),
+    corners excluded; None on a C2 path or when there is none.
+
+    Corners (tangent breaks and cusps, `Path.corners_s`) are exact stops, where the feed
+    and with it the step |jump| v^2 is 0; x_ss either side of a cusp is not even finite.
+    Read there, a pchip walk's cusp (every axis at an extremum) gave a jump of 5.8e7 per
+    mm: a crawl cap of 1e-4 mm/s on the two nodes either side of the stop (8 of the
+    plan's 15.1 s), the grid refined to h / 4096 around it, and jerk rows that pinned
+    those nodes at 0, which `_unstall` tried to lift in 174 LPs (tests/test_lp_knot_rows.py's
+    fuzzed case, 70 s of planning). As `PiecewisePath.xss_jumps` and the heuristic's
+    knot zones, which skip corners too."""
     if path.continuity() >= 2:
         return None
     knots = path.breakpoints_s()
-    knots = knots[(knots > lo) & (knots < hi)]
+    knots = knots[(knots > lo) & (knots < hi) & ~np.isin(knots, path.corners_s())]
     if knots.size == 0:
         return None
     u = path.u_of_s(knots)
