@@ -92,6 +92,19 @@ def _inside(values: np.ndarray, lo: float, hi: float, pad: float) -> np.ndarray:
     return values[(values > lo + pad) & (values < hi - pad)]
 
 
+def end_corners(corners: np.ndarray, lo: float, hi: float, pad: float) -> tuple[bool, bool]:
+    """Whether a corner of the path lies at arc length lo, and at hi (within pad).
+
+    Why: at a cusp the chain rule's x_ss and x_sss beside the corner are cancellation
+    (`_retreat_from_corners`); a request from rest at a cusp of a pchip walk read them at
+    its first budget point and planned its 15 mm from one corner to the next in 4248 s
+    (7.6 s from 1e-6 further on), and the LP's rest splice, which plans exactly such
+    stretches, spent 85 s verifying that plan (`bench/fuzz_paths.py` case (3035, 2, 11,
+    0.979, -0.883, 'pchip'))."""
+    c = np.asarray(corners, dtype=float)
+    return bool(np.any(np.abs(c - lo) <= pad)), bool(np.any(np.abs(c - hi) <= pad))
+
+
 def s_derivatives_at_u(path: Path, u: np.ndarray) -> tuple[np.ndarray, ...]:
     """sigma = ds/du (n,) and x_s, x_ss, x_sss (n, naxes) at parameters u.
 
@@ -228,7 +241,11 @@ def build_grid(path: Path, s_begin: float, s_end: float, dt: float, limits: Axis
     (`lead_length`)."""
     span = s_end - s_begin
     pad = _TINY * max(span, 1.0)
-    corners = _inside(path.corners_s(), s_begin, s_end, pad)
+    all_corners = path.corners_s()
+    corners = _inside(all_corners, s_begin, s_end, pad)
+    # a request may start or end at a corner (a rest between two stops, the LP's rest
+    # splice): its end cells get the corner treatment too (`end_corners`)
+    begins_at, ends_at = end_corners(all_corners, s_begin, s_end, pad)
     knots = _inside(path.breakpoints_s(), s_begin, s_end, pad)
     caps = _inside(feed_cap.s_breaks, s_begin, s_end, pad) if feed_cap is not None else []
     nodes = np.unique(np.concatenate([[s_begin, s_end], corners, knots, caps]))
@@ -257,8 +274,10 @@ def build_grid(path: Path, s_begin: float, s_end: float, dt: float, limits: Axis
     offset = np.arange(cell_node.size) - np.repeat(np.cumsum(nsub) - nsub, nsub)
     du = (nodes_u[1:] - nodes_u[:-1])[cell_node] / nsub[cell_node]
     u0 = nodes_u[cell_node] + du * offset
-    cells = _refine_cells(path, _evaluate_cells(path, u0, du, cell_node),
-                          np.isin(nodes, corners))
+    corner_node = np.isin(nodes, corners)
+    corner_node[0] |= begins_at
+    corner_node[-1] |= ends_at
+    cells = _refine_cells(path, _evaluate_cells(path, u0, du, cell_node), corner_node)
     u0, du, cell_node = cells.u0, cells.du, cells.node
     sigma, xs, xss, xsss = cells.sigma, cells.xs, cells.xss, cells.xsss
     total, partial = _cell_arc_lengths(sigma, du)
@@ -288,11 +307,17 @@ def build_grid(path: Path, s_begin: float, s_end: float, dt: float, limits: Axis
             c1_cap[cells[ok]] = np.minimum(c1_cap[cells[ok]], c1_caps[ok])
             jerk_scale[cells[ok]] = 1.0 - 0.75 * shares.c1_knot
     corner_after = np.zeros(ncell, dtype=bool)
+    corner_before = np.zeros(ncell, dtype=bool)
     if corners.size:
         corner_after[np.searchsorted(edges, corners - pad) - 1] = True
-        corner_before = np.zeros(ncell, dtype=bool)
         corner_before[np.searchsorted(edges, corners - pad)] = True
-        _retreat_from_corners(s, xs, xss, xsss, corner_before, corner_after)
+    # (an end corner is not marked `corner_after`: the request's ends are states of
+    # their own, which the planner and its verification hold already)
+    corner_before[0] |= begins_at
+    retreat_after = corner_after.copy()
+    retreat_after[-1] |= ends_at
+    if corner_before.any() or retreat_after.any():
+        _retreat_from_corners(s, xs, xss, xsss, corner_before, retreat_after)
     lead_cells = int(np.count_nonzero(cell_node == 0)) if lead > 0.0 else 0
     return PathGrid(edges, s, xs, xss, xsss, jerk_scale, c1_cap, corner_after, lead_cells)
 
