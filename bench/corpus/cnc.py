@@ -142,6 +142,13 @@ def polyline_pieces(name: str, n: int, size: float) -> list[Piece]:
     return [Piece(1, np.array([0.0, 0.0, 1.0, 1.0]), pts[i:i + 2]) for i in range(n)]
 
 
+def jog_walk(name: str, n: int, step: float) -> np.ndarray:
+    """n XY points (mm) of a random walk with normal steps of `step` mm per axis: a
+    quarter of its points reverse both axes, the cusps of a pchip fit through them."""
+    rng = rng_for(name)
+    return np.cumsum(np.vstack([np.zeros(2), step * rng.normal(size=(n - 1, 2))]), axis=0)
+
+
 def cycloid_points(a: float, scale: float, loops: float, spacing: float) -> np.ndarray:
     """A prolate/curtate cycloid x = t - a sin t, y = 1 - a cos t (mm after `scale`):
     a -> 1 makes cusps (a = 1 exactly: true cusps, the tangent reverses)."""
@@ -261,6 +268,12 @@ def corpus() -> list[CorpusPath]:
         "c-polyline-deg1-30", xy, lambda: polyline_pieces("c-polyline-deg1-30", 30, 8.0),
         "30 straight moves (degree-1 pieces): a stop at every corner",
         {"kind": "polyline", "pieces": 30}))
+    out.append(_points_entry(
+        "c-walk-xy-pchip-cusps-60pts", _xy_config("pchip"),
+        lambda: jog_walk("c-walk-xy-pchip-cusps-60pts", 60, 8.0),
+        "a random walk of 60 XY points (steps ~8 mm) fitted pchip: where both axes reverse "
+        "at a point the fit's tangent vanishes (a cusp, a stop) and elsewhere the knots are "
+        "C1", {"kind": "cusp", "npoints": 60, "fit": "pchip"}, fit="pchip"))
     out.append(_points_entry(
         "c-spiral-xy-0p2mm", xy, lambda: spiral_points(12, 4.0, 0.2),
         "Archimedean spiral from the centre, 12 turns, pitch 4 mm, 0.2 mm points",
