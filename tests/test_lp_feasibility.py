@@ -873,11 +873,15 @@ def test_a_repair_whose_warm_linearization_stalls_is_solved_afresh():
     that no pass lifts (the fuzz case's whole job: 12 passes, each moving the stall by a
     node, then "the jerk LP has no solution"). The round is then solved again from the
     v+a solution at the tightened limits (`LPPlanner._relinearized_repair`): the plan
-    repairs, and passes the checker. A window of the fuzz path that needs one repair."""
+    repairs, and passes the checker. A window of the fuzz path, between two of its cusps,
+    that needs one repair (the window 513.3 .. 976.6 needed one only while the LP read
+    its cusps as C1 knots, before stop 51)."""
     from bench.fuzz_paths import DT, build
 
     path, limits = build(FUZZ_PCHIP_CASE)
-    req = PlanRequest(path, limits.scaled(0.95), PathState(513.28148884), 976.603654, dt=DT)
+    corners = path.corners_s()
+    req = PlanRequest(path, limits.scaled(0.95), PathState(float(corners[4])),
+                      float(corners[6]), dt=DT)
     planner = _StalledWarmRepairLP()
     res = planner.plan(req)
     assert planner.warm_failures > 0 and res.info["repairs"] > 0
